@@ -1,0 +1,56 @@
+"""Everything that touches OpenGL: contexts, shader loading, the leaf renderer, readback.
+
+The module-level :func:`render` and :func:`evaluate` use one process-wide headless renderer,
+created on first use and released by :func:`shutdown` (also registered with ``atexit``).
+"""
+
+from __future__ import annotations
+
+import atexit
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..model.params import LeafParams
+from .context import GLUnavailable, check_error, create_headless_context
+from .renderer import DEFAULT_GRID, LeafRenderer
+from .shaders import ShaderError
+
+__all__ = ["LeafRenderer", "GLUnavailable", "ShaderError", "create_headless_context", "check_error",
+           "default_renderer", "render", "evaluate", "shutdown", "DEFAULT_GRID"]
+
+_default: LeafRenderer | None = None
+
+
+def default_renderer() -> LeafRenderer:
+    """The shared headless renderer (created on first use)."""
+    global _default
+    if _default is None:
+        _default = LeafRenderer()
+    return _default
+
+
+def shutdown() -> None:
+    """Release the shared renderer and its context."""
+    global _default
+    if _default is not None:
+        _default.release()
+        _default = None
+
+
+atexit.register(shutdown)
+
+
+def render(params: LeafParams, size: Any = (256, 256), view: str = "top",
+           background: ArrayLike | None = None, **kwargs: Any) -> NDArray[Any]:
+    """Render one leaf offscreen: (h, w, 4) uint8 RGBA, sRGB, row 0 at the top.
+
+    See :meth:`LeafRenderer.render` for ``grid``, ``samples`` and ``linear``.
+    """
+    return default_renderer().render(params, size, view, background, **kwargs)
+
+
+def evaluate(params: LeafParams, u: ArrayLike, v: ArrayLike) -> NDArray[np.float32]:
+    """Positions L_Ω(u, v) computed by the rendering vertex shader, (N, 3) float32."""
+    return default_renderer().capture(params, u, v)[0]

@@ -1,0 +1,252 @@
+"""The leaf renderer: one program evaluating L_Ω in the vertex shader, headless framebuffers,
+and the transform-feedback capture that tests and export read back.
+
+Every GL object is created and released here (``release()`` / context manager); caches of
+grids and framebuffers are bounded so long batch runs do not grow.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from typing import Any
+
+import moderngl
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..camera import VIEWS, Camera, frame_view
+from ..model.leaf import JITTER_TABLE_SIZE, evaluate, grid_indices, grid_uv, jitter_table
+from ..model.params import LeafParams
+from .context import create_headless_context
+from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BINDING, LEAF_BLOCK, pack_leaf
+from .shaders import build_program
+
+__all__ = ["LeafRenderer", "DEFAULT_GRID", "Lighting"]
+
+DEFAULT_GRID = (33, 65)
+_MAX_CACHED = 3
+
+
+class Lighting:
+    """Default key + fill lights (world space, directions towards the light) and ambient."""
+
+    key = (0.35, -0.45, 0.82, 1.05)
+    fill = (-0.65, 0.45, 0.45, 0.35)
+    ambient = (0.16, 0.17, 0.18)
+
+
+class _LRU(OrderedDict):
+    """A small cache whose evicted values are released."""
+
+    def __init__(self, limit: int) -> None:
+        super().__init__()
+        self.limit = limit
+
+    def get_or_make(self, key: Any, make: Any) -> Any:
+        if key in self:
+            self.move_to_end(key)
+            return self[key]
+        value = self[key] = make()
+        while len(self) > self.limit:
+            _, old = self.popitem(last=False)
+            _release(old)
+        return value
+
+    def clear_all(self) -> None:
+        for value in self.values():
+            _release(value)
+        self.clear()
+
+
+def _release(obj: Any) -> None:
+    if isinstance(obj, (tuple, list)):
+        for o in obj:
+            _release(o)
+    elif obj is not None:
+        obj.release()
+
+
+class LeafRenderer:
+    """Draws one leaf at a time from its uniform block.
+
+    Parameters
+    ----------
+    ctx:
+        A moderngl context (window or headless). ``None`` creates a headless EGL context that
+        this renderer owns and releases.
+    """
+
+    def __init__(self, ctx: moderngl.Context | None = None) -> None:
+        self._owns_ctx = ctx is None
+        self.ctx = ctx if ctx is not None else create_headless_context()
+        self.program = build_program(self.ctx, "leaf.vert", "leaf.frag",
+                                     varyings=("v_object", "v_object_normal"))
+        self.program["Leaf"].binding = LEAF_BINDING
+        self.program["Frame"].binding = FRAME_BINDING
+        self.leaf_ubo = self.ctx.buffer(reserve=LEAF_BLOCK.nbytes)
+        self.frame_ubo = self.ctx.buffer(reserve=FRAME_BLOCK.nbytes)
+        self.jitter_tex = self.ctx.texture((JITTER_TABLE_SIZE, 1), 1, dtype="f4")
+        self.jitter_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self._jitter_seed: int | None = None
+        self._leaf = LEAF_BLOCK.zeros()
+        self._frame = FRAME_BLOCK.zeros()
+        self._grids = _LRU(_MAX_CACHED)
+        self._targets = _LRU(_MAX_CACHED)
+        self.uploads = 0  # bytes written to GPU buffers/textures by set_leaf (for edit-cost tests)
+
+    # -- lifetime -------------------------------------------------------------------------------
+    def release(self) -> None:
+        self._grids.clear_all()
+        self._targets.clear_all()
+        _release([self.program, self.leaf_ubo, self.frame_ubo, self.jitter_tex])
+        if self._owns_ctx:
+            self.ctx.release()
+
+    def __enter__(self) -> "LeafRenderer":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    @property
+    def gl_renderer(self) -> str:
+        return str(self.ctx.info["GL_RENDERER"])
+
+    # -- state ----------------------------------------------------------------------------------
+    def set_leaf(self, params: LeafParams) -> None:
+        """Upload the leaf's uniform block (288 bytes) and, if its seed changed, its jitter row.
+
+        Changing jitter amplitude or density only changes the block: nothing is rebuilt.
+        """
+        pack_leaf(params, self._leaf)
+        self.leaf_ubo.write(self._leaf.tobytes())
+        self.uploads += LEAF_BLOCK.nbytes
+        if params.jitter.enabled and self._jitter_seed != params.jitter.seed:
+            table = jitter_table(params.jitter)
+            self.jitter_tex.write(table.tobytes())
+            self.uploads += table.nbytes
+            self._jitter_seed = params.jitter.seed
+
+    def set_camera(self, camera: Camera, *, srgb: bool, flat: bool = False,
+                   lighting: type[Lighting] = Lighting) -> None:
+        f = self._frame
+        f["view"] = camera.view.T
+        f["proj"] = camera.proj.T
+        f["eye"] = camera.eye
+        f["key"] = lighting.key
+        f["fill"] = lighting.fill
+        f["ambient"][:3] = lighting.ambient
+        f["flags"] = (int(srgb), int(flat), 0, 0)
+        self.frame_ubo.write(f.tobytes())
+
+    def _bind(self) -> None:
+        self.leaf_ubo.bind_to_uniform_block(LEAF_BINDING)
+        self.frame_ubo.bind_to_uniform_block(FRAME_BINDING)
+        self.jitter_tex.use(location=0)
+
+    def grid(self, nu: int, nv: int) -> moderngl.VertexArray:
+        """The (cached) vertex array of the (nu × nv) grid: (u, v) attributes and triangles."""
+        def make() -> tuple[moderngl.VertexArray, moderngl.Buffer, moderngl.Buffer]:
+            vbo = self.ctx.buffer(grid_uv(nu, nv).tobytes())
+            ibo = self.ctx.buffer(grid_indices(nu, nv).tobytes())
+            vao = self.ctx.vertex_array(self.program, [(vbo, "2f", "in_uv")], index_buffer=ibo,
+                                        index_element_size=4)
+            return vao, vbo, ibo
+
+        return self._grids.get_or_make((nu, nv), make)[0]
+
+    def _target(self, w: int, h: int, samples: int, linear: bool) -> tuple[moderngl.Framebuffer, ...]:
+        def make() -> tuple[Any, ...]:
+            dtype = "f4" if linear else "f1"
+            color = self.ctx.renderbuffer((w, h), 4, dtype=dtype)
+            depth = self.ctx.depth_renderbuffer((w, h))
+            fbo = self.ctx.framebuffer([color], depth)
+            if not samples:
+                return fbo, fbo, color, depth
+            mcolor = self.ctx.renderbuffer((w, h), 4, samples=samples, dtype=dtype)
+            mdepth = self.ctx.depth_renderbuffer((w, h), samples=samples)
+            mfbo = self.ctx.framebuffer([mcolor], mdepth)
+            return mfbo, fbo, color, depth, mcolor, mdepth
+
+        return self._targets.get_or_make((w, h, samples, linear), make)
+
+    # -- drawing --------------------------------------------------------------------------------
+    def render(self, params: LeafParams, size: tuple[int, int] = (256, 256), view: str = "top",
+               background: ArrayLike | None = None, *, grid: tuple[int, int] = DEFAULT_GRID,
+               samples: int | None = None, linear: bool = False) -> NDArray[Any]:
+        """Render ``params`` offscreen; (h, w, 4) uint8 sRGB, or float32 linear if ``linear``.
+
+        ``background=None`` leaves alpha 0 around the leaf; leaf pixels have alpha 255 (1.0),
+        partial at multisampled edges. ``samples`` defaults to 0 for ``top`` and 4 otherwise.
+        """
+        w, h = _check_size(size)
+        if view not in VIEWS:
+            raise ValueError(f"unknown view {view!r} (choose from {', '.join(VIEWS)})")
+        nu, nv = grid
+        if samples is None:
+            samples = 0 if view == "top" else 4
+        samples = min(samples, self.ctx.max_samples)
+
+        uv = grid_uv(nu, nv)
+        pts = evaluate(params, uv[:, 0], uv[:, 1])
+        m = params.transform.matrix()
+        world = pts @ m[:3, :3].T + m[:3, 3]
+        self.set_leaf(params)
+        self.set_camera(frame_view(view, world, (w, h)), srgb=not linear)
+        target = self._target(w, h, samples, linear)
+        draw_fbo, read_fbo = target[0], target[1]
+
+        bg = _background(background)
+        draw_fbo.use()
+        draw_fbo.clear(*bg, depth=1.0)
+        self.ctx.enable_only(moderngl.DEPTH_TEST)
+        self._bind()
+        self.grid(nu, nv).render(moderngl.TRIANGLES)
+        if draw_fbo is not read_fbo:
+            self.ctx.copy_framebuffer(read_fbo, draw_fbo)
+        dtype = "f4" if linear else "f1"
+        raw = read_fbo.read(components=4, dtype=dtype)
+        img = np.frombuffer(raw, dtype=np.float32 if linear else np.uint8).reshape(h, w, 4)
+        return np.ascontiguousarray(img[::-1])
+
+    def capture(self, params: LeafParams, u: ArrayLike, v: ArrayLike) -> tuple[NDArray[np.float32], ...]:
+        """Positions and normals (leaf space) computed by the rendering vertex shader at (u, v),
+        read back through transform feedback: two (N, 3) float32 arrays."""
+        uu, vv = np.broadcast_arrays(np.asarray(u, np.float32), np.asarray(v, np.float32))
+        uv = np.stack([uu.ravel(), vv.ravel()], axis=-1)
+        n = uv.shape[0]
+        if n == 0:
+            return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)
+        self.set_leaf(params)
+        self._bind()
+        # a surfaceless EGL context has no default framebuffer; draws (even with rasterizer
+        # discard) need a complete one bound, else GL_INVALID_FRAMEBUFFER_OPERATION
+        self._target(1, 1, 0, False)[0].use()
+        vbo = self.ctx.buffer(uv.tobytes())
+        out = self.ctx.buffer(reserve=n * 24)
+        vao = self.ctx.vertex_array(self.program, [(vbo, "2f", "in_uv")])
+        try:
+            vao.transform(out, mode=moderngl.POINTS, vertices=n)
+            data = np.frombuffer(out.read(), dtype=np.float32).reshape(n, 6)
+        finally:
+            _release([vao, vbo, out])
+        return data[:, :3].copy(), data[:, 3:].copy()
+
+
+def _check_size(size: Any) -> tuple[int, int]:
+    try:
+        w, h = (int(size), int(size)) if np.isscalar(size) else (int(size[0]), int(size[1]))
+    except (TypeError, ValueError, IndexError):
+        raise ValueError(f"size must be N or (width, height), got {size!r}") from None
+    if not (1 <= w <= 16384 and 1 <= h <= 16384):
+        raise ValueError(f"image size {w}×{h} outside 1..16384")
+    return w, h
+
+
+def _background(bg: ArrayLike | None) -> tuple[float, float, float, float]:
+    if bg is None:
+        return (0.0, 0.0, 0.0, 0.0)
+    c = [float(x) for x in np.asarray(bg, dtype=np.float64).ravel()]
+    if len(c) not in (3, 4) or not all(0.0 <= x <= 1.0 for x in c):
+        raise ValueError(f"background must be 3 or 4 numbers in [0, 1], got {bg!r}")
+    return (c[0], c[1], c[2], c[3] if len(c) == 4 else 1.0)

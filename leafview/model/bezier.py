@@ -1,0 +1,52 @@
+"""Bézier curves in power-basis form (seed 004, eq. 1) and their derivatives.
+
+A degree-n curve is ``B(t) = [1, t, ..., t^n] · Z · [b_0 ... b_n]^T`` where ``Z`` holds
+the Bernstein coefficients. The same basis is written in ``shaders/bezier.glsl``; tests compare
+the two through the leaf evaluator.
+"""
+
+from __future__ import annotations
+
+from math import comb
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["bernstein", "bernstein_matrix", "evaluate_curve", "derivative_points"]
+
+
+def bernstein_matrix(n: int) -> NDArray[np.float64]:
+    """The (n+1)×(n+1) matrix ``Z`` of eq. 1: row k holds the coefficients of t^k.
+
+    ``Z[k, i] = C(n, i) C(n-i, k-i) (-1)^(k-i)`` for ``k >= i``; for n = 3 it is the matrix of eq. 6.
+    """
+    z = np.zeros((n + 1, n + 1))
+    for i in range(n + 1):
+        for k in range(i, n + 1):
+            z[k, i] = comb(n, i) * comb(n - i, k - i) * (-1) ** (k - i)
+    return z
+
+
+def bernstein(n: int, t: ArrayLike) -> NDArray[np.float64]:
+    """Bernstein basis values ``B_{i,n}(t)``, shape ``t.shape + (n+1,)``."""
+    t = np.asarray(t, dtype=np.float64)[..., None]
+    i = np.arange(n + 1)
+    coeff = np.array([comb(n, k) for k in i], dtype=np.float64)
+    return coeff * t**i * (1.0 - t) ** (n - i)
+
+
+def evaluate_curve(points: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
+    """Evaluate the Bézier curve with control points ``points`` (n+1, d) at ``t``.
+
+    Batched control points ``(..., n+1, d)`` broadcast against ``t`` of shape ``(...)``.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    basis = bernstein(p.shape[-2] - 1, t)
+    return np.einsum("...i,...id->...d", basis, p)
+
+
+def derivative_points(points: ArrayLike) -> NDArray[np.float64]:
+    """Control points of the hodograph: ``B'(t)`` is the degree n-1 curve ``n (b_{i+1} - b_i)``."""
+    p = np.asarray(points, dtype=np.float64)
+    n = p.shape[-2] - 1
+    return n * (p[..., 1:, :] - p[..., :-1, :])

@@ -1,0 +1,225 @@
+"""Reference evaluation of the leaf surface L_Ω(u, v) (seed 004 sec. 3, eqs 1-6) in float64.
+
+Conventions (the GLSL in ``shaders/leaf_eval.glsl`` follows them line for line):
+
+* ``u ∈ [-1, 1]``, ``v ∈ [0, 1]``. ``σ = +1`` for ``u >= 0`` (the half built with ``+x̄s``),
+  ``σ = -1`` for ``u < 0`` (built with ``-x̄s``); ``s = |u|`` is the cross-section parameter.
+* In-plane axis normal (eq. 2): ``n(v) = normalize((-A'_y, A'_x, 0))``. For a straight axis along
+  +y this is -x, so the ``u >= 0`` half lies on the -x side and u runs from +x (u = -1) to -x
+  (u = +1): one continuous parameterisation across the midrib.
+* Control points (eqs 3-4) for side σ: ``s_i = A(v̄_i) + σ x̄_i n(v̄_i) + z̄s_i ẑ``,
+  ``f_i`` and ``g_i`` the same with ``σ x̄_i / 3``, ``2 σ x̄_i / 3`` and ``z̄f_i``, ``z̄g_i``; S, F, G
+  are quartics with base (0,0,0) and apex (0,1,0).
+* Cross-section (eqs 5-6): ``L = Σ_k B³_k(s) c_k(v)`` with ``c = (A, F_σ, G_σ, S_σ)``.
+* Jitter (sec. 6), when enabled: ``D = amp · j(v) · s² · τ(v) · σ n(v)`` with ``j`` the periodic
+  piecewise-linear table read at ``v · density``, ``τ(v) = 1 - (2v - 1)⁴`` (zero at base and
+  apex) and ``s²`` fading it to zero at the midrib with zero slope, so the blade stays whole.
+* Normals: ``N = normalize(∂L/∂v × ∂L/∂u)`` = −(∂L/∂u × ∂L/∂v), the upper (+z for a flat leaf,
+  adaxial, "front") side. At the pinched base and apex ∂L/∂u vanishes; there the limit direction
+  ``±∂²L/∂u∂v`` replaces it (``+`` at v = 0, ``-`` at v = 1).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .bezier import bernstein, derivative_points
+from .params import Jitter, LeafParams
+
+__all__ = [
+    "JITTER_TABLE_SIZE",
+    "jitter_table",
+    "Partials",
+    "partials",
+    "evaluate",
+    "normals",
+    "tessellate",
+    "Mesh",
+    "grid_uv",
+    "grid_indices",
+]
+
+JITTER_TABLE_SIZE = 256
+_BASE = np.zeros(3)
+_APEX = np.array([0.0, 1.0, 0.0])
+
+
+def jitter_table(jitter: Jitter, size: int = JITTER_TABLE_SIZE) -> NDArray[np.float32]:
+    """The jitter values for ``jitter.seed``: ``size`` uniform numbers in [0, 1], float32 (the
+    exact values uploaded to the GPU texture, so both sides read identical data)."""
+    rng = np.random.default_rng(int(jitter.seed))
+    return rng.random(size).astype(np.float32)
+
+
+def _curve(points: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.float64]:
+    return bernstein(points.shape[-2] - 1, t) @ points
+
+
+def _axis_normal(d: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Eq. 2: the axis tangent rotated by +90° in xy, z dropped, normalised."""
+    m = np.stack([-d[..., 1], d[..., 0], np.zeros_like(d[..., 0])], axis=-1)
+    return m / np.linalg.norm(m, axis=-1, keepdims=True)
+
+
+def _side_controls(params: LeafParams, sigma: float) -> tuple[NDArray[np.float64], ...]:
+    """Control points (5, 3) of S, F and G for side ``sigma`` (eqs 3, 4a, 4b)."""
+    sh = params.shape
+    pa = sh.axis_points()
+    vbar, xs = sh.vbar, sh.xs
+    a = _curve(pa, vbar)
+    n = _axis_normal(_curve(derivative_points(pa), vbar))
+    z = np.array([0.0, 0.0, 1.0])
+    out = []
+    for frac, zz in ((1.0, sh.zs), (1 / 3, np.asarray(sh.zf)), (2 / 3, np.asarray(sh.zg))):
+        mid = a + (sigma * frac * xs)[:, None] * n + np.asarray(zz)[:, None] * z
+        out.append(np.vstack([_BASE, mid, _APEX]))
+    s, f, g = out
+    return s, f, g
+
+
+@dataclass(frozen=True)
+class Partials:
+    """``L`` and its partial derivatives at N points, each (N, 3) float64."""
+
+    L: NDArray[np.float64]
+    Lu: NDArray[np.float64]
+    Lv: NDArray[np.float64]
+    Luv: NDArray[np.float64]
+
+
+def _uv(u: ArrayLike, v: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    uu, vv = np.broadcast_arrays(np.asarray(u, dtype=np.float64), np.asarray(v, dtype=np.float64))
+    uu, vv = uu.ravel(), vv.ravel()
+    if np.any(~np.isfinite(uu)) or np.any(~np.isfinite(vv)):
+        raise ValueError("u and v must be finite")
+    if np.any(np.abs(uu) > 1.0) or np.any((vv < 0.0) | (vv > 1.0)):
+        raise ValueError("u must lie in [-1, 1] and v in [0, 1]")
+    return uu, vv
+
+
+def partials(params: LeafParams, u: ArrayLike, v: ArrayLike) -> Partials:
+    """Evaluate L, ∂L/∂u, ∂L/∂v and ∂²L/∂u∂v (jitter included when enabled)."""
+    uu, vv = _uv(u, v)
+    sigma = np.where(uu >= 0.0, 1.0, -1.0)
+    s = np.abs(uu)
+    pa = params.shape.axis_points()
+    pa_d = derivative_points(pa)
+
+    # longitudinal curves c_k(v) and their v-derivatives, per side
+    c = np.empty((4,) + vv.shape + (3,))
+    dc = np.empty_like(c)
+    c[0], dc[0] = _curve(pa, vv), _curve(pa_d, vv)
+    for side in (1.0, -1.0):
+        mask = sigma == side
+        if not mask.any():
+            continue
+        sc, fc, gc = _side_controls(params, side)
+        for k, pts in ((1, fc), (2, gc), (3, sc)):
+            c[k][mask] = _curve(pts, vv[mask])
+            dc[k][mask] = _curve(derivative_points(pts), vv[mask])
+
+    b = bernstein(3, s)  # (N, 4)
+    db = bernstein(2, s) @ np.array([[-3, 3, 0, 0], [0, -3, 3, 0], [0, 0, -3, 3]], dtype=np.float64)
+    L = np.einsum("nk,knd->nd", b, c)
+    Lu = sigma[:, None] * np.einsum("nk,knd->nd", db, c)
+    Lv = np.einsum("nk,knd->nd", b, dc)
+    Luv = sigma[:, None] * np.einsum("nk,knd->nd", db, dc)
+
+    jit = params.jitter
+    if jit.enabled and jit.amplitude > 0.0:
+        L, Lu, Lv, Luv = _add_jitter(params, s, sigma, vv, pa_d, L, Lu, Lv, Luv)
+    return Partials(L, Lu, Lv, Luv)
+
+
+def _add_jitter(params, s, sigma, vv, pa_d, L, Lu, Lv, Luv):
+    jit = params.jitter
+    table = jitter_table(jit).astype(np.float64)
+    size = table.shape[0]
+    t = vv * jit.density
+    i0 = np.floor(t)
+    frac = t - i0
+    i0 = i0.astype(np.int64) % size
+    i1 = (i0 + 1) % size
+    j = table[i0] + (table[i1] - table[i0]) * frac
+    dj = (table[i1] - table[i0]) * jit.density
+    w = 2.0 * vv - 1.0
+    tau, dtau = 1.0 - w**4, -8.0 * w**3
+
+    d1 = _curve(pa_d, vv)
+    d2 = _curve(derivative_points(pa_d), vv)
+    m = np.stack([-d1[:, 1], d1[:, 0], np.zeros_like(vv)], axis=-1)
+    dm = np.stack([-d2[:, 1], d2[:, 0], np.zeros_like(vv)], axis=-1)
+    mlen = np.linalg.norm(m, axis=-1, keepdims=True)
+    n = m / mlen
+    dn = (dm - n * np.sum(n * dm, axis=-1, keepdims=True)) / mlen
+
+    amp = jit.amplitude
+    g = (j * tau)[:, None] * n                               # j τ n
+    dg = (dj * tau + j * dtau)[:, None] * n + (j * tau)[:, None] * dn
+    L = L + (amp * s**2 * sigma)[:, None] * g
+    Lu = Lu + (amp * 2.0 * s)[:, None] * g
+    Lv = Lv + (amp * s**2 * sigma)[:, None] * dg
+    Luv = Luv + (amp * 2.0 * s)[:, None] * dg
+    return L, Lu, Lv, Luv
+
+
+def evaluate(params: LeafParams, u: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
+    """Points L_Ω(u, v) of eq. 6 in leaf space (no world transform), shape (N, 3) float64."""
+    return partials(params, u, v).L
+
+
+def normals(params: LeafParams, u: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
+    """Unit upper-side normals ``normalize(∂L/∂v × ∂L/∂u)`` (see the module docstring), (N, 3)."""
+    uu, vv = _uv(u, v)
+    p = partials(params, uu, vv)
+    return _normal_from(p, vv)
+
+
+def _normal_from(p: Partials, vv: NDArray[np.float64]) -> NDArray[np.float64]:
+    lu = np.where((vv <= 0.0)[:, None], p.Luv, np.where((vv >= 1.0)[:, None], -p.Luv, p.Lu))
+    n = np.cross(p.Lv, lu)
+    length = np.linalg.norm(n, axis=-1, keepdims=True)
+    return n / np.where(length > 0.0, length, 1.0)
+
+
+def grid_uv(nu: int, nv: int) -> NDArray[np.float32]:
+    """The fixed (u, v) grid, (nu·nv, 2) float32, u fastest: ``u = linspace(-1, 1, nu)``,
+    ``v = linspace(0, 1, nv)``. An odd ``nu`` puts a column on the midrib."""
+    if nu < 2 or nv < 2:
+        raise ValueError(f"grid needs at least 2×2 samples, got {nu}×{nv}")
+    u = np.linspace(-1.0, 1.0, nu)
+    v = np.linspace(0.0, 1.0, nv)
+    uu, vv = np.meshgrid(u, v)
+    return np.stack([uu.ravel(), vv.ravel()], axis=-1).astype(np.float32)
+
+
+def grid_indices(nu: int, nv: int) -> NDArray[np.uint32]:
+    """Triangles of the grid, (2(nu-1)(nv-1), 3) uint32, counter-clockwise seen from +z."""
+    i = np.arange(nu - 1)
+    j = np.arange(nv - 1)
+    ii, jj = np.meshgrid(i, j)
+    p00 = (jj * nu + ii).ravel()
+    p10, p01 = p00 + 1, p00 + nu
+    p11 = p01 + 1
+    tris = np.concatenate([np.stack([p00, p01, p10], -1), np.stack([p10, p01, p11], -1)])
+    return tris.astype(np.uint32)
+
+
+@dataclass(frozen=True)
+class Mesh:
+    """A baked leaf: ``vertices`` and ``normals`` (V, 3) float64, ``uv`` (V, 2), ``indices`` (T, 3)."""
+
+    vertices: NDArray[np.float64]
+    normals: NDArray[np.float64]
+    uv: NDArray[np.float64]
+    indices: NDArray[np.uint32]
+
+
+def tessellate(params: LeafParams, nu: int = 33, nv: int = 65) -> Mesh:
+    """Bake the leaf on the (nu × nv) grid of :func:`grid_uv` (leaf space, no world transform)."""
+    uv = grid_uv(nu, nv).astype(np.float64)
+    p = partials(params, uv[:, 0], uv[:, 1])
+    return Mesh(p.L, _normal_from(p, uv[:, 1]), uv, grid_indices(nu, nv))

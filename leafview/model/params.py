@@ -1,0 +1,349 @@
+"""Leaf parameters: the 21-number shape vector Ω of seed 004 sec. 3 plus jitter, material and
+world transform, with validation that names the offending field.
+
+Layout of Ω (``to_vector`` / ``from_vector``)::
+
+    [a1(3), a2(3), v̄1, x̄s1, z̄s1, v̄2, x̄s2, z̄s2, v̄3, x̄s3, z̄s3, z̄f1, z̄f2, z̄f3, z̄g1, z̄g2, z̄g3]
+
+The axis A is cubic with fixed base (0,0,0) and apex (0,1,0); S, F and G are quartic and share
+base and apex with it (eqs 3-4). Parameters are immutable: edits return new objects, which makes
+undo and comparison trivial.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, Mapping
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = [
+    "SCHEMA_VERSION",
+    "OMEGA_SIZE",
+    "ParamError",
+    "FieldSpec",
+    "Shape",
+    "Jitter",
+    "Material",
+    "Transform",
+    "LeafParams",
+    "field_specs",
+]
+
+SCHEMA_VERSION = 1
+OMEGA_SIZE = 21
+
+Vec3 = tuple[float, float, float]
+
+
+class ParamError(ValueError):
+    """Invalid leaf parameters. ``path`` is the dotted field path (``shape.silhouette[1][0]``),
+    ``source`` the file (and ``line:col`` for syntax errors) when known."""
+
+    def __init__(self, path: str, message: str, source: str | None = None) -> None:
+        self.path = path
+        self.message = message
+        self.source = source
+        where = f"{source}: " if source else ""
+        what = f"{path}: " if path else ""
+        super().__init__(f"{where}{what}{message}")
+
+    def with_source(self, source: str) -> "ParamError":
+        return ParamError(self.path, self.message, source)
+
+
+@dataclass(frozen=True)
+class FieldSpec:
+    """UI and validation metadata of one parameter (used by the viewer panel and the checks)."""
+
+    label: str
+    group: str
+    soft_range: tuple[float, float]
+    step: float
+    hard_range: tuple[float | None, float | None] = (None, None)
+    kind: str = "float"  # float | int | bool | color | vec3 | rows
+
+
+def _spec(label: str, group: str, lo: float, hi: float, step: float, *, hard=(None, None),
+          kind: str = "float", default: Any) -> Any:
+    return field(default=default, metadata={"spec": FieldSpec(label, group, (lo, hi), step, hard, kind)})
+
+
+@dataclass(frozen=True)
+class Shape:
+    """Ω: the Bézier control data of eqs 3-4 (leaf length normalised to 1 along +y)."""
+
+    a1: Vec3 = _spec("axis a1", "axis", -0.5, 0.5, 0.005, kind="vec3", default=(0.0, 1 / 3, 0.0))
+    a2: Vec3 = _spec("axis a2", "axis", -0.5, 1.0, 0.005, kind="vec3", default=(0.0, 2 / 3, 0.0))
+    silhouette: tuple[Vec3, Vec3, Vec3] = _spec(
+        "silhouette rows (v̄, x̄s, z̄s)", "silhouette", -0.5, 1.0, 0.005, kind="rows",
+        default=((0.25, 0.35, 0.0), (0.5, 0.4, 0.0), (0.75, 0.25, 0.0)))
+    zf: Vec3 = _spec("z̄f (F at 1/3 width)", "curvature", -0.3, 0.3, 0.002, kind="vec3",
+                     default=(0.0, 0.0, 0.0))
+    zg: Vec3 = _spec("z̄g (G at 2/3 width)", "curvature", -0.3, 0.3, 0.002, kind="vec3",
+                     default=(0.0, 0.0, 0.0))
+
+    @property
+    def vbar(self) -> NDArray[np.float64]:
+        return np.array([r[0] for r in self.silhouette])
+
+    @property
+    def xs(self) -> NDArray[np.float64]:
+        return np.array([r[1] for r in self.silhouette])
+
+    @property
+    def zs(self) -> NDArray[np.float64]:
+        return np.array([r[2] for r in self.silhouette])
+
+    def axis_points(self) -> NDArray[np.float64]:
+        """The four control points of the cubic axis A: base, a1, a2, apex."""
+        return np.array([(0.0, 0.0, 0.0), self.a1, self.a2, (0.0, 1.0, 0.0)], dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Jitter:
+    """Serrated margin (seed 004 sec. 6): a periodic table of ``table_size`` values in [0, 1]
+    drawn from ``seed``, read at ``v · density``; ``amplitude`` is the largest outward offset in
+    leaf lengths (the paper's "degree")."""
+
+    enabled: bool = _spec("jitter on", "jitter", 0, 1, 1, kind="bool", default=False)
+    amplitude: float = _spec("degree", "jitter", 0.0, 0.08, 0.001, hard=(0.0, 1.0), default=0.02)
+    density: float = _spec("density (teeth per leaf)", "jitter", 1.0, 120.0, 1.0, hard=(1e-3, 4096.0),
+                           default=36.0)
+    seed: int = _spec("seed", "jitter", 0, 9999, 1, hard=(0, 2**31 - 1), kind="int", default=0)
+
+
+@dataclass(frozen=True)
+class Material:
+    """Two-sided leaf material: linear-ish RGB in [0, 1] and a translucency weight in [0, 1]."""
+
+    front: Vec3 = _spec("front colour", "material", 0, 1, 0.01, hard=(0.0, 1.0), kind="color",
+                        default=(0.18, 0.42, 0.12))
+    back: Vec3 = _spec("back colour", "material", 0, 1, 0.01, hard=(0.0, 1.0), kind="color",
+                       default=(0.40, 0.58, 0.26))
+    translucency: float = _spec("translucency", "material", 0.0, 1.0, 0.01, hard=(0.0, 1.0),
+                                default=0.35)
+
+
+@dataclass(frozen=True)
+class Transform:
+    """World placement, kept apart from the shape (seed 004 sec. 3, "coordinate frames")."""
+
+    translation: Vec3 = _spec("translation", "transform", -5, 5, 0.01, kind="vec3",
+                              default=(0.0, 0.0, 0.0))
+    rotation: Vec3 = _spec("rotation XYZ (degrees)", "transform", -180, 180, 1, kind="vec3",
+                           default=(0.0, 0.0, 0.0))
+    scale: float = _spec("scale", "transform", 0.05, 10, 0.01, hard=(1e-6, None), default=1.0)
+
+    def matrix(self) -> NDArray[np.float64]:
+        """4×4 column-vector matrix ``T · Rz · Ry · Rx · s`` (rotations in degrees)."""
+        rx, ry, rz = np.radians(self.rotation)
+        cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
+        r_x = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+        r_y = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+        r_z = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+        m = np.eye(4)
+        m[:3, :3] = r_z @ r_y @ r_x * self.scale
+        m[:3, 3] = self.translation
+        return m
+
+
+@dataclass(frozen=True)
+class LeafParams:
+    """Everything that describes one leaf. ``shape`` is Ω; the rest are independent groups."""
+
+    shape: Shape = field(default_factory=Shape)
+    jitter: Jitter = field(default_factory=Jitter)
+    material: Material = field(default_factory=Material)
+    transform: Transform = field(default_factory=Transform)
+    name: str = ""
+
+    # -- Ω as a flat vector -------------------------------------------------------------------
+    def to_vector(self) -> NDArray[np.float64]:
+        """Ω in the paper's order (see the module docstring), shape (21,)."""
+        s = self.shape
+        rows = [c for row in s.silhouette for c in row]
+        return np.array([*s.a1, *s.a2, *rows, *s.zf, *s.zg], dtype=np.float64)
+
+    @classmethod
+    def from_vector(cls, omega: ArrayLike) -> "LeafParams":
+        """Build parameters from Ω (21 numbers); jitter off, everything else at its default."""
+        w = np.asarray(omega, dtype=np.float64)
+        if w.shape != (OMEGA_SIZE,):
+            raise ParamError("omega", f"expected {OMEGA_SIZE} numbers, got shape {w.shape}")
+        data = {
+            "a1": w[0:3], "a2": w[3:6],
+            "silhouette": w[6:15].reshape(3, 3),
+            "zf": w[15:18], "zg": w[18:21],
+        }
+        shape = _parse_group(Shape, {k: v.tolist() for k, v in data.items()}, "shape", required=True)
+        return cls(shape=shape)
+
+    # -- dicts ----------------------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """Plain nested dict (lists, floats, ints, bools), the on-disk form with ``schema``."""
+        out: dict[str, Any] = {"schema": SCHEMA_VERSION}
+        if self.name:
+            out["name"] = self.name
+        for group in ("shape", "jitter", "material", "transform"):
+            obj = getattr(self, group)
+            out[group] = {f.name: _plain(getattr(obj, f.name)) for f in fields(obj)}
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> "LeafParams":
+        """Validate a nested dict (as read from TOML/JSON); raises :class:`ParamError`."""
+        return parse_params(data)
+
+    # -- files ----------------------------------------------------------------------------------
+    @classmethod
+    def load(cls, path: Any) -> "LeafParams":
+        """Read a ``.toml`` or ``.json`` preset (see :mod:`leafview.model.io`)."""
+        from .io import load_params
+
+        return load_params(path)
+
+    def save(self, path: Any) -> None:
+        """Write a ``.toml`` or ``.json`` preset atomically."""
+        from .io import save_params
+
+        save_params(self, path)
+
+    def replace(self, **groups: Any) -> "LeafParams":
+        return replace(self, **groups)
+
+
+def field_specs() -> dict[str, FieldSpec]:
+    """Metadata of every editable field keyed by dotted path, e.g. ``"jitter.amplitude"``."""
+    out: dict[str, FieldSpec] = {}
+    for group, cls in _GROUPS.items():
+        for f in fields(cls):
+            out[f"{group}.{f.name}"] = f.metadata["spec"]
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# validation
+_GROUPS: dict[str, type] = {"shape": Shape, "jitter": Jitter, "material": Material, "transform": Transform}
+_TOP_KEYS = {"schema", "name", *_GROUPS}
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, tuple):
+        return [_plain(v) for v in value]
+    return value
+
+
+def _number(value: Any, path: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ParamError(path, f"expected a number, got {type(value).__name__} {value!r}")
+    x = float(value)
+    if math.isnan(x):
+        raise ParamError(path, "is NaN; every parameter must be a finite number")
+    if math.isinf(x):
+        raise ParamError(path, f"is {'+' if x > 0 else '-'}Inf; every parameter must be a finite number")
+    return x
+
+
+def _vector(value: Any, n: int, path: str) -> tuple[float, ...]:
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if not isinstance(value, (list, tuple)):
+        raise ParamError(path, f"expected a list of {n} numbers, got {type(value).__name__} {value!r}")
+    if len(value) != n:
+        raise ParamError(path, f"expected {n} numbers, got {len(value)}")
+    return tuple(_number(v, f"{path}[{i}]") for i, v in enumerate(value))
+
+
+def _check_range(x: float, spec: FieldSpec, path: str) -> None:
+    lo, hi = spec.hard_range
+    if lo is not None and x < lo:
+        raise ParamError(path, f"{x!r} is below the minimum {lo}")
+    if hi is not None and x > hi:
+        raise ParamError(path, f"{x!r} is above the maximum {hi}")
+
+
+def _parse_field(value: Any, spec: FieldSpec, path: str) -> Any:
+    if spec.kind == "bool":
+        if not isinstance(value, bool):
+            raise ParamError(path, f"expected true or false, got {type(value).__name__} {value!r}")
+        return value
+    if spec.kind == "int":
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ParamError(path, f"expected an integer, got {type(value).__name__} {value!r}")
+        _check_range(float(value), spec, path)
+        return int(value)
+    if spec.kind in ("vec3", "color"):
+        vec = _vector(value, 3, path)
+        for i, x in enumerate(vec):
+            _check_range(x, spec, f"{path}[{i}]")
+        return vec
+    if spec.kind == "rows":
+        if isinstance(value, np.ndarray):
+            value = value.tolist()
+        if not isinstance(value, (list, tuple)) or len(value) != 3:
+            raise ParamError(path, "expected 3 rows [v̄, x̄s, z̄s]")
+        return tuple(_vector(row, 3, f"{path}[{i}]") for i, row in enumerate(value))
+    x = _number(value, path)
+    _check_range(x, spec, path)
+    return x
+
+
+def _parse_group(cls: type, data: Any, group: str, *, required: bool) -> Any:
+    if not isinstance(data, Mapping):
+        raise ParamError(group, f"expected a table of fields, got {type(data).__name__}")
+    known = {f.name: f for f in fields(cls)}
+    for key in data:
+        if key not in known:
+            raise ParamError(f"{group}.{key}", f"unknown key (known: {', '.join(known)})")
+    values = {}
+    for name, f in known.items():
+        path = f"{group}.{name}"
+        if name not in data:
+            if required:
+                raise ParamError(path, "missing field")
+            continue
+        values[name] = _parse_field(data[name], f.metadata["spec"], path)
+    obj = cls(**values)
+    if cls is Shape:
+        _check_shape(obj)
+    return obj
+
+
+def _check_shape(shape: Shape) -> None:
+    v = shape.vbar
+    for i, x in enumerate(v):
+        if not 0.0 < x < 1.0:
+            raise ParamError(f"shape.silhouette[{i}][0]", f"v̄ = {x!r} must lie strictly inside (0, 1)")
+    for i in range(1, 3):
+        if not v[i] > v[i - 1]:
+            raise ParamError(f"shape.silhouette[{i}][0]",
+                             f"v̄ must be strictly increasing: {v[i - 1]!r} then {v[i]!r}")
+
+
+def parse_params(data: Any) -> LeafParams:
+    """Validate a nested dict into :class:`LeafParams` (``schema`` and ``shape`` required)."""
+    if not isinstance(data, Mapping):
+        raise ParamError("", f"expected a table at the top level, got {type(data).__name__}")
+    if not data:
+        raise ParamError("", "empty document: expected 'schema' and a [shape] table")
+    for key in data:
+        if key not in _TOP_KEYS:
+            raise ParamError(str(key), f"unknown key (known: {', '.join(sorted(_TOP_KEYS))})")
+    if "schema" not in data:
+        raise ParamError("schema", f"missing field (this version writes schema = {SCHEMA_VERSION})")
+    schema = data["schema"]
+    if isinstance(schema, bool) or not isinstance(schema, int):
+        raise ParamError("schema", f"expected an integer, got {type(schema).__name__} {schema!r}")
+    if schema != SCHEMA_VERSION:
+        raise ParamError("schema", f"unsupported schema version {schema} (this leafview reads {SCHEMA_VERSION})")
+    name = data.get("name", "")
+    if not isinstance(name, str):
+        raise ParamError("name", f"expected a string, got {type(name).__name__}")
+    if "shape" not in data:
+        raise ParamError("shape", "missing table")
+    groups = {g: _parse_group(cls, data[g], g, required=(g == "shape"))
+              for g, cls in _GROUPS.items() if g in data}
+    return LeafParams(name=name, **groups)

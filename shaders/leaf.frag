@@ -1,0 +1,44 @@
+#version 450
+// Two-sided leaf shading: front (upper, +z side) and back colours, a key and a fill light,
+// diffuse transmission ("translucency") for light arriving from the other side, a faint
+// specular sheen on the upper side and a lighter midrib.
+#include "generated/frame_block.glsl"
+#include "color.glsl"
+
+in vec3 v_world;
+in vec3 v_normal;
+in vec2 v_uv;
+flat in vec4 v_front;
+flat in vec3 v_back;
+
+out vec4 frag_color;
+
+vec3 light_term(vec3 n, vec3 view_dir, vec4 light, vec3 albedo, float translucency, float sheen) {
+    vec3 l = normalize(light.xyz);
+    float diffuse = max(dot(n, l), 0.0);
+    float through = translucency * max(dot(-n, l), 0.0);
+    vec3 h = normalize(l + view_dir);
+    float spec = sheen * pow(max(dot(n, h), 0.0), 40.0) * step(0.0, dot(n, l));
+    return light.w * ((diffuse + through) * albedo + vec3(spec));
+}
+
+void main() {
+    bool front = gl_FrontFacing;
+    vec3 n = normalize(v_normal) * (front ? 1.0 : -1.0);
+    vec3 albedo = front ? v_front.rgb : v_back;
+    float translucency = v_front.a;
+    // midrib: a narrow lighter band along u = 0, fading toward the apex
+    float rib = (1.0 - smoothstep(0.012, 0.035, abs(v_uv.x))) * (1.0 - 0.6 * v_uv.y);
+    albedo = mix(albedo, albedo * 1.35 + vec3(0.05), 0.6 * rib);
+
+    vec3 view_dir = frame.eye.w > 0.5 ? normalize(frame.eye.xyz - v_world) : -normalize(frame.eye.xyz);
+    vec3 color = frame.ambient.rgb * albedo;
+    if (frame.flags.y != 0) {
+        color = albedo;
+    } else {
+        float sheen = front ? 0.12 : 0.03;
+        color += light_term(n, view_dir, frame.key, albedo, translucency, sheen);
+        color += light_term(n, view_dir, frame.fill, albedo, translucency, 0.0);
+    }
+    frag_color = vec4(frame.flags.x != 0 ? linear_to_srgb(color) : color, 1.0);
+}
