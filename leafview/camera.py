@@ -14,7 +14,7 @@ Views:
     Perspective (30° vertical field of view) from the -y side, 20° above the leaf plane, +z up:
     shows the cross-section curvature.
 ``three-quarter``
-    Perspective from azimuth 35° (towards +x from the front) and 35° elevation.
+    Perspective from azimuth 35° (towards +x from the front) and 50° elevation.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 __all__ = ["VIEWS", "Camera", "frame_view"]
 
 VIEWS = ("top", "front", "three-quarter")
-_ORBITS = {"front": (0.0, 20.0), "three-quarter": (35.0, 35.0)}
+_ORBITS = {"front": (0.0, 20.0), "three-quarter": (35.0, 50.0)}
 FOV_DEG = 30.0
 TOP_FILL = 0.9
 
@@ -75,7 +75,7 @@ def _orbit(points, lo, hi, w, h, az_deg, el_deg) -> Camera:
     fov_y = np.radians(FOV_DEG)
     fov_x = 2 * np.arctan(np.tan(fov_y / 2) * w / h)
     half = min(fov_y, fov_x) / 2
-    dist = radius / np.sin(half) * 1.02
+    dist = radius / np.sin(half) * 1.08
     eye = center + dist * direction
     view = pyrr.matrix44.create_look_at(eye, center, np.array([0.0, 0.0, 1.0]), dtype=np.float64).T
     near, far = max(dist - radius * 1.5, 1e-3), dist + radius * 1.5

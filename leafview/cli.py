@@ -1,0 +1,226 @@
+"""The ``leafview`` command.
+
+Exit codes: 0 success, 2 bad input (arguments, presets, paths), 1 a runtime failure (no OpenGL,
+an image that could not be written). A failing run writes no file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Sequence
+
+from . import __version__
+from .model.params import LeafParams, ParamError
+
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
+_VIEWS = ("top", "front", "three-quarter")
+
+
+class UsageError(Exception):
+    """Bad command-line input; reported with exit code 2."""
+
+
+def _size(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of pixels, got {text!r}") from None
+    if not 8 <= n <= 8192:
+        raise argparse.ArgumentTypeError(f"size must be between 8 and 8192 pixels, got {n}")
+    return n
+
+
+def _grid(text: str) -> tuple[int, int]:
+    try:
+        nu, nv = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected NUxNV such as 33x65, got {text!r}") from None
+    if not (2 <= nu <= 1025 and 2 <= nv <= 1025):
+        raise argparse.ArgumentTypeError(f"grid {nu}x{nv} outside 2..1025 per direction")
+    return nu, nv
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="leafview", description="Parametric plant leaves evaluated on the GPU.")
+    parser.add_argument("--version", action="version", version=f"leafview {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    r = sub.add_parser("render", help="render thumbnails of presets offscreen",
+                       description="Render presets (files, directories of presets, or built-in names such "
+                                   "as 'ovate') to images. One preset and -o FILE writes that file; several "
+                                   "presets write one image each into -o DIR; --sheet writes one labelled "
+                                   "contact sheet to -o FILE.")
+    r.add_argument("presets", nargs="+", metavar="PRESET")
+    r.add_argument("-o", "--output", required=True, metavar="FILE|DIR")
+    r.add_argument("--size", type=_size, default=256, help="image width and height in pixels (default 256)")
+    r.add_argument("--view", choices=_VIEWS, default="top", help="camera (default top)")
+    r.add_argument("--format", choices=("png", "exr", "tif"), default=None,
+                   help="image type (default: from the -o suffix, else png)")
+    r.add_argument("--sheet", action="store_true", help="one labelled contact sheet instead of one image each")
+    r.add_argument("--grid", type=_grid, default=None, metavar="NUxNV", help="(u, v) samples (default 33x65)")
+    r.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+
+    sub.add_parser("presets", help="list the built-in presets")
+
+    b = sub.add_parser("bench", help="measure rendering speed (prints GL_RENDERER and ratios)")
+    b.add_argument("--json", action="store_true", help="print the results as JSON")
+    b.add_argument("--quick", action="store_true", help="small counts: a smoke run, not a measurement")
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "render":
+            return _render(args)
+        if args.command == "presets":
+            return _presets()
+        if args.command == "bench":
+            from .benchmarks import main as bench_main
+
+            return bench_main((["--json"] if args.json else []) + (["--quick"] if args.quick else []))
+    except (UsageError, ParamError) as exc:
+        print(f"leafview {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("leafview: interrupted; no partial files were left", file=sys.stderr)
+        return 130
+    except Exception as exc:  # GL unavailable, OIIO failures: a message, not a traceback
+        from .gpu.context import GLUnavailable
+        from .imaging import ImageWriteError
+
+        if isinstance(exc, (GLUnavailable, ImageWriteError)):
+            print(f"leafview {args.command}: {exc}", file=sys.stderr)
+            return EXIT_FAILURE
+        raise
+    return EXIT_FAILURE
+
+
+# -- render ------------------------------------------------------------------------------------
+def _expand(specs: Sequence[str]) -> list[Path]:
+    from .resources import builtin_presets, resolve_preset
+
+    paths: list[Path] = []
+    for spec in specs:
+        path = resolve_preset(spec)
+        if not path.exists() and not path.suffix:
+            raise UsageError(f"{spec}: no such file, directory or built-in preset "
+                             f"(built-in: {', '.join(builtin_presets())})")
+        if path.is_dir():
+            found = sorted([*path.glob("*.toml"), *path.glob("*.json")])
+            if not found:
+                raise UsageError(f"{path}: directory holds no .toml or .json presets")
+            paths.extend(found)
+        else:
+            paths.append(path)
+    return paths
+
+
+def _plan(args: argparse.Namespace, count: int) -> tuple[str, Path, str]:
+    """(mode, output path, format) with mode 'file', 'dir' or 'sheet'; raises UsageError."""
+    from .imaging import format_of
+
+    out = Path(args.output)
+    suffix_fmt = format_of(out)
+    if args.sheet or count == 1 and out.suffix:
+        if out.suffix and suffix_fmt is None:
+            raise UsageError(f"-o {out}: unknown image type {out.suffix!r} (use .png, .exr or .tif)")
+        if args.format and suffix_fmt and args.format != suffix_fmt:
+            raise UsageError(f"-o {out} is a .{suffix_fmt} file but --format {args.format} was given")
+        fmt = args.format or suffix_fmt or "png"
+        if not out.suffix:
+            out = out.with_suffix("." + fmt)
+        if out.is_dir():
+            raise UsageError(f"-o {out} is a directory; give a file name")
+        if args.sheet and fmt == "exr":
+            raise UsageError("--sheet writes an 8-bit labelled image: use .png or .tif")
+        return ("sheet" if args.sheet else "file"), out, fmt
+    if suffix_fmt is not None:
+        raise UsageError(f"{count} presets need -o DIR (one image each) or --sheet, not the file {out}")
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"-o {out} exists and is not a directory")
+    return "dir", out, args.format or "png"
+
+
+def _render(args: argparse.Namespace) -> int:
+    from .imaging import FORMATS, contact_sheet, write_image
+
+    paths = _expand(args.presets)
+    mode, out, fmt = _plan(args, len(paths))
+    leaves = [LeafParams.load(p) for p in paths]  # validate everything before writing anything
+    names = [p.name or path.stem for p, path in zip(leaves, paths)]
+    if mode == "dir" and len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise UsageError(f"several presets are named {', '.join(dup)}: their images would overwrite each other")
+
+    from .gpu import default_renderer
+
+    renderer = default_renderer()
+    kwargs = {"grid": args.grid} if args.grid else {}
+    linear = fmt == "exr"
+    started = time.perf_counter()
+
+    def draw(leaf: LeafParams):
+        return renderer.render(leaf, (args.size, args.size), args.view, linear=linear, **kwargs)
+
+    if mode == "file":
+        write_image(out, draw(leaves[0]), params=leaves[0], description=_describe(leaves[0], args))
+        _report(args, f"wrote {out} ({args.size}×{args.size}, {args.view} view, {names[0]})")
+        return EXIT_OK
+
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(leaves), unit="leaf", disable=None if not args.quiet else True, file=sys.stderr,
+               desc="rendering")
+    if mode == "sheet":
+        images = []
+        for leaf in leaves:
+            images.append(draw(leaf))
+            bar.update()
+        bar.close()
+        write_image(out, contact_sheet(images, names), description=f"leafview contact sheet: {', '.join(names)}")
+        _report(args, f"wrote {out}: contact sheet of {len(leaves)} leaves ({args.view} view) "
+                      f"in {time.perf_counter() - started:.1f} s")
+        return EXIT_OK
+
+    written: list[Path] = []
+    try:
+        for leaf, name in zip(leaves, names):
+            written.append(write_image(out / f"{name}{FORMATS[fmt]}", draw(leaf), params=leaf,
+                                       description=_describe(leaf, args)))
+            bar.update()
+    except BaseException:
+        for path in written:  # a failed batch leaves no half-finished directory behind
+            path.unlink(missing_ok=True)
+        raise
+    finally:
+        bar.close()
+    _report(args, f"wrote {len(written)} {fmt} thumbnails ({args.size}×{args.size}, {args.view} view) to {out}/ "
+                  f"in {time.perf_counter() - started:.1f} s")
+    return EXIT_OK
+
+
+def _describe(leaf: LeafParams, args: argparse.Namespace) -> str:
+    return f"leafview {__version__}: {leaf.name or 'leaf'}, {args.view} view"
+
+
+def _report(args: argparse.Namespace, text: str) -> None:
+    if not args.quiet:
+        print(text)
+
+
+def _presets() -> int:
+    from .resources import builtin_presets
+
+    for name, path in builtin_presets().items():
+        print(f"{name:14s} {path}")
+    return EXIT_OK
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -206,8 +206,10 @@ class LeafRenderer:
             self.ctx.copy_framebuffer(read_fbo, draw_fbo)
         dtype = "f4" if linear else "f1"
         raw = read_fbo.read(components=4, dtype=dtype)
-        img = np.frombuffer(raw, dtype=np.float32 if linear else np.uint8).reshape(h, w, 4)
-        return np.ascontiguousarray(img[::-1])
+        img = np.frombuffer(raw, dtype=np.float32 if linear else np.uint8).reshape(h, w, 4)[::-1]
+        if samples and not linear and bg[3] == 0.0:
+            img = _unpremultiply(img)
+        return np.ascontiguousarray(img)
 
     def capture(self, params: LeafParams, u: ArrayLike, v: ArrayLike) -> tuple[NDArray[np.float32], ...]:
         """Positions and normals (leaf space) computed by the rendering vertex shader at (u, v),
@@ -231,6 +233,19 @@ class LeafRenderer:
         finally:
             _release([vao, vbo, out])
         return data[:, :3].copy(), data[:, 3:].copy()
+
+
+def _unpremultiply(img: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """Resolved multisampled edges over a transparent clear are premultiplied (colour · coverage);
+    8-bit images carry straight alpha, so divide the coverage back out."""
+    alpha = img[..., 3:4].astype(np.float32)
+    partial = (alpha > 0) & (alpha < 255)
+    if not partial.any():
+        return img
+    out = img.copy()
+    rgb = np.clip(img[..., :3].astype(np.float32) * 255.0 / np.maximum(alpha, 1.0) + 0.5, 0, 255)
+    out[..., :3] = np.where(partial, rgb, img[..., :3]).astype(np.uint8)
+    return out
 
 
 def _check_size(size: Any) -> tuple[int, int]:

@@ -120,9 +120,9 @@ class Material:
     """Two-sided leaf material: linear-ish RGB in [0, 1] and a translucency weight in [0, 1]."""
 
     front: Vec3 = _spec("front colour", "material", 0, 1, 0.01, hard=(0.0, 1.0), kind="color",
-                        default=(0.18, 0.42, 0.12))
+                        default=(0.045, 0.15, 0.025))
     back: Vec3 = _spec("back colour", "material", 0, 1, 0.01, hard=(0.0, 1.0), kind="color",
-                       default=(0.40, 0.58, 0.26))
+                       default=(0.13, 0.25, 0.06))
     translucency: float = _spec("translucency", "material", 0.0, 1.0, 0.01, hard=(0.0, 1.0),
                                 default=0.35)
 

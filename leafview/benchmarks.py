@@ -1,0 +1,361 @@
+"""``leafview bench``: throughput of the GPU paths, measured side by side in one process.
+
+Benchmarks are not tests: nothing here asserts a timing. Every timing is the median of several
+repeats, with ``ctx.finish()`` before the clock stops; the GL renderer (``GL_RENDERER``) is part
+of the result because numbers from llvmpipe (software) and a real GPU are not comparable.
+
+Measured (see :func:`run` for the keys):
+
+* 128×128 three-quarter thumbnails (grid 32×64, readback included) with :class:`LeafRenderer`,
+  against matplotlib ``plot_trisurf`` (Agg) of the same tessellated mesh at 128×128 px;
+* 10⁴ scattered leaves (grid 9×15 = 224 triangles each) into a 512×512 framebuffer with depth
+  test: the parametric path (:class:`~leafview.gpu.instanced.InstancedLeaves`, one instanced
+  draw from a 288-byte record per leaf) against the same triangles pre-baked
+  (:class:`~leafview.gpu.instanced.BakedLeaves`, one indexed draw);
+* bytes per leaf of a baked 32×64 mesh against the parameter record.
+
+Run: ``leafview bench [--json] [--quick]`` or ``python bench/run_bench.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+__all__ = ["run", "main", "GOALS", "PAPER_LEAVES_PER_S"]
+
+PAPER_LEAVES_PER_S = 550.0  # seed 001: ~550 leaf instances/s on a quad-core laptop
+THUMB_SIZE = (128, 128)
+THUMB_GRID = (32, 64)
+SCENE_GRID = (9, 15)        # 2·8·14 = 224 triangles per leaf
+SCENE_SIZE = (512, 512)
+BYTES_GRID = (32, 64)
+
+# goals (reported, never asserted): key -> minimum
+GOALS = {
+    "thumbnail_speedup": 20.0,
+    "param_vs_baked_speed": 0.9,
+    "baked_vs_param_bytes": 250.0,
+    "vs_paper_550": 20.0,
+}
+
+_CONFIG = {
+    # thumbnail params, passes over them per repeat, repeats, matplotlib repeats, scene leaves, repeats
+    False: dict(thumb_params=4, thumb_passes=4, thumb_repeats=5, mpl_passes=2, mpl_repeats=3,
+                leaves=10_000, scene_repeats=7),
+    True: dict(thumb_params=2, thumb_passes=1, thumb_repeats=2, mpl_passes=1, mpl_repeats=2,
+               leaves=300, scene_repeats=2),
+}
+
+
+class _Progress:
+    """Step names on stderr, only when stderr is a terminal."""
+
+    def __init__(self, total: int) -> None:
+        self.enabled = sys.stderr.isatty()
+        self.total, self.done = total, 0
+
+    def step(self, what: str) -> None:
+        self.done += 1
+        if self.enabled:
+            sys.stderr.write(f"\r\033[K[{self.done}/{self.total}] {what}")
+            sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\r\033[K")
+            sys.stderr.flush()
+
+
+def _median_time(fn: Callable[[], Any], repeats: int, finish: Callable[[], None] | None = None) -> float:
+    """Median wall time of ``fn`` over ``repeats`` runs (``finish`` before the clock stops)."""
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        if finish is not None:
+            finish()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def thumbnail_params(k: int) -> list[Any]:
+    """``k`` distinct single leaves at the origin: plain, serrated, cupped, curved axis, …"""
+    from .model.params import Jitter, LeafParams, Shape
+
+    variants = [
+        LeafParams(name="ovate"),
+        LeafParams(shape=Shape(silhouette=((0.2, 0.25, 0.0), (0.5, 0.3, 0.02), (0.8, 0.15, 0.0))),
+                   jitter=Jitter(enabled=True, amplitude=0.02, density=36.0, seed=3), name="serrated"),
+        LeafParams(shape=Shape(zf=(0.03, 0.05, 0.03), zg=(0.06, 0.09, 0.05)), name="cupped"),
+        LeafParams(shape=Shape(a1=(0.08, 0.33, 0.05), a2=(0.12, 0.66, 0.1),
+                               silhouette=((0.3, 0.45, 0.0), (0.55, 0.4, 0.0), (0.8, 0.2, 0.0))),
+                   name="curved"),
+    ]
+    return [variants[i % len(variants)] for i in range(k)]
+
+
+def _mpl_thumbnail(params: Any) -> np.ndarray:
+    """matplotlib baseline: plot_trisurf of tessellate(params, 32, 64), 128×128 px RGBA."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    from .model.leaf import tessellate
+
+    mesh = tessellate(params, *THUMB_GRID)
+    m = params.transform.matrix()
+    p = mesh.vertices @ m[:3, :3].T + m[:3, 3]
+    fig = Figure(figsize=(THUMB_SIZE[0] / 100, THUMB_SIZE[1] / 100), dpi=100)
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0), projection="3d")
+    ax.plot_trisurf(p[:, 0], p[:, 1], p[:, 2], triangles=mesh.indices, color=params.material.front,
+                    linewidth=0, antialiased=False, shade=True)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    c, r = (lo + hi) / 2, max(float((hi - lo).max()) / 2, 1e-6)  # equal axes, like the GL camera
+    ax.set_xlim(c[0] - r, c[0] + r), ax.set_ylim(c[1] - r, c[1] + r), ax.set_zlim(c[2] - r, c[2] + r)
+    ax.set_box_aspect((1, 1, 1))
+    ax.view_init(elev=35, azim=-55)  # the three-quarter view: 35° towards +x from -y, 35° up
+    ax.set_axis_off()
+    canvas.draw()
+    img = np.asarray(canvas.buffer_rgba()).copy()
+    fig.clear()
+    return img
+
+
+def _scene(ctx: Any, n_leaves: int, repeats: int, progress: _Progress) -> dict[str, Any]:
+    """Median seconds per frame of ``n_leaves`` scattered leaves, instanced vs baked."""
+    from .camera import frame_view
+    from .gpu.context import check_error
+    from .gpu.instanced import (BakedLeaves, InstancedLeaves, OffscreenTarget, pack_leaves,
+                                read_rgba, scatter_leaves)
+
+    params = scatter_leaves(n_leaves, seed=1)
+    records, tables = pack_leaves(params)
+    with OffscreenTarget(ctx, SCENE_SIZE) as target:
+        fbo = target.fbo
+        fbo.use()
+        with InstancedLeaves(ctx, records, SCENE_GRID, jitter_tables=tables) as inst:
+            # bake by capturing the instanced vertex shader: bit-identical vertices, and seconds
+            # faster than 10⁴ numpy tessellations (the tests compare both bakes)
+            pos, nrm = inst.capture()
+            camera = frame_view("three-quarter", pos.reshape(-1, 3), SCENE_SIZE)
+            with BakedLeaves(ctx, pos, nrm, SCENE_GRID, records["front"],
+                             records["back"][:, :3]) as baked:
+                del pos, nrm
+                check_error(ctx, "scene setup")
+                images = []
+                for batch in (inst, baked):  # warm-up: JIT-compiles the shader variants
+                    batch.set_camera(camera)
+                    fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                    batch.draw()
+                    check_error(ctx, f"{type(batch).__name__}.draw")
+                    images.append(read_rgba(fbo))
+
+                def frame(batch: Any) -> Callable[[], None]:
+                    def go() -> None:
+                        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                        batch.draw()
+                    return go
+
+                progress.step("instanced vs baked leaves")
+                t_inst, t_baked = [], []
+                for _ in range(repeats):  # interleaved, so drift hits both alike
+                    t_inst.append(_median_time(frame(inst), 1, ctx.finish))
+                    t_baked.append(_median_time(frame(baked), 1, ctx.finish))
+                check_error(ctx, "scene draws")
+                tris = inst.triangles_per_leaf
+    a, b = (im.astype(np.int16) for im in images)
+    return {"t_instanced": statistics.median(t_inst), "t_baked": statistics.median(t_baked),
+            "mean_abs_diff": float(np.abs(a - b).mean()),
+            "coverage": float((images[0][..., 3] > 0).mean()), "triangles_per_leaf": tris}
+
+
+def run(quick: bool = False) -> dict[str, Any]:
+    """Run every benchmark in this process; returns a flat dict (see the module docstring).
+
+    Keys: ``gl_renderer``, ``thumbnails_per_s``, ``matplotlib_thumbnails_per_s``,
+    ``thumbnail_speedup``, ``param_vs_baked_speed`` (+ ``instanced_leaves_per_s``,
+    ``baked_leaves_per_s``, ``param_vs_baked_mean_abs_diff``), ``baked_vs_param_bytes`` (+
+    ``baked_bytes_per_leaf``, ``param_bytes_per_leaf``), ``leaves_per_s_220tri``,
+    ``vs_paper_550``, and the configuration: counts, grids, versions, ``cpu_count``.
+    """
+    import matplotlib
+    import moderngl
+
+    from . import __version__
+    from .gpu.context import check_error, create_headless_context
+    from .gpu.layout import LEAF_BLOCK
+    from .gpu.renderer import LeafRenderer
+
+    cfg = _CONFIG[bool(quick)]
+    progress = _Progress(6)
+    res: dict[str, Any] = {}
+    ctx = create_headless_context()
+    try:
+        res["gl_renderer"] = str(ctx.info["GL_RENDERER"])
+        res["gl_version"] = str(ctx.info["GL_VERSION"])
+
+        # -- thumbnails: LeafRenderer vs matplotlib, same params, same mesh --------------------
+        thumbs = thumbnail_params(cfg["thumb_params"])
+        with LeafRenderer(ctx) as renderer:
+            progress.step("GL thumbnails (warm-up)")
+            for p in thumbs:  # compile shader variants, allocate the target
+                renderer.render(p, THUMB_SIZE, view="three-quarter", grid=THUMB_GRID)
+            check_error(ctx, "thumbnail warm-up")
+
+            def gl_pass() -> None:
+                for _ in range(cfg["thumb_passes"]):
+                    for p in thumbs:
+                        renderer.render(p, THUMB_SIZE, view="three-quarter", grid=THUMB_GRID)
+
+            progress.step("GL thumbnails")
+            n_gl = cfg["thumb_passes"] * len(thumbs)
+            t_gl = _median_time(gl_pass, cfg["thumb_repeats"], ctx.finish)
+            check_error(ctx, "thumbnails")
+            # LeafRenderer.release() deletes its (current) framebuffer and moderngl re-binds the
+            # current one after creating the next: bind framebuffer 0 first
+            ctx.detect_framebuffer(0).use()
+        res["thumbnails_per_s"] = n_gl / t_gl
+
+        progress.step("matplotlib thumbnails")
+        _mpl_thumbnail(thumbs[0])  # import 3D machinery, fonts, caches
+
+        def mpl_pass() -> None:
+            for _ in range(cfg["mpl_passes"]):
+                for p in thumbs:
+                    _mpl_thumbnail(p)
+
+        n_mpl = cfg["mpl_passes"] * len(thumbs)
+        t_mpl = _median_time(mpl_pass, cfg["mpl_repeats"])
+        res["matplotlib_thumbnails_per_s"] = n_mpl / t_mpl
+        res["thumbnail_speedup"] = res["thumbnails_per_s"] / res["matplotlib_thumbnails_per_s"]
+
+        # -- many leaves: parameters (instanced) vs baked meshes, identical triangles ----------
+        progress.step(f"scene setup ({cfg['leaves']} leaves)")
+        n_leaves = cfg["leaves"]
+        scene = _scene(ctx, n_leaves, cfg["scene_repeats"], progress)
+        res["instanced_leaves_per_s"] = n_leaves / scene["t_instanced"]
+        res["baked_leaves_per_s"] = n_leaves / scene["t_baked"]
+        res["param_vs_baked_speed"] = res["instanced_leaves_per_s"] / res["baked_leaves_per_s"]
+        res["param_vs_baked_mean_abs_diff"] = scene["mean_abs_diff"]
+        res["scene_coverage"] = scene["coverage"]
+        tris = scene["triangles_per_leaf"]
+
+        # -- bytes per leaf ---------------------------------------------------------------------
+        progress.step("bytes per leaf")
+        nu, nv = BYTES_GRID
+        verts, tri_count = nu * nv, 2 * (nu - 1) * (nv - 1)
+        res["baked_bytes_per_leaf"] = verts * (3 + 3 + 2) * 4 + tri_count * 3 * 4
+        res["param_bytes_per_leaf"] = LEAF_BLOCK.nbytes
+        res["baked_vs_param_bytes"] = res["baked_bytes_per_leaf"] / res["param_bytes_per_leaf"]
+
+        # -- against the paper: the instanced path at ~220 triangles per leaf (same run) --------
+        res["leaves_per_s_220tri"] = res["instanced_leaves_per_s"]
+        res["triangles_per_leaf"] = tris
+        res["vs_paper_550"] = res["leaves_per_s_220tri"] / PAPER_LEAVES_PER_S
+    finally:
+        progress.close()
+        ctx.release()
+
+    res.update({
+        "quick": bool(quick),
+        "thumbnail_size": list(THUMB_SIZE),
+        "thumbnail_grid": list(THUMB_GRID),
+        "thumbnail_count": n_gl,
+        "matplotlib_thumbnail_count": n_mpl,
+        "scene_leaves": n_leaves,
+        "scene_grid": list(SCENE_GRID),
+        "scene_size": list(SCENE_SIZE),
+        "bytes_grid": list(BYTES_GRID),
+        "cpu_count": os.cpu_count() or 0,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "moderngl": moderngl.__version__,
+        "matplotlib": matplotlib.__version__,
+        "leafview": __version__,
+        "platform": platform.platform(),
+    })
+    return res
+
+
+def _goal(key: str, res: dict[str, Any]) -> str:
+    if key not in GOALS:
+        return ""
+    ok = res[key] >= GOALS[key]
+    return f"goal ≥ {GOALS[key]:g}: {'met' if ok else 'NOT met'}"
+
+
+def format_table(res: dict[str, Any]) -> str:
+    """The readable report printed by ``leafview bench``."""
+    def num(x: float) -> str:
+        return f"{x:,.1f}" if abs(x) >= 100 else f"{x:.3g}" if x < 10 else f"{x:.1f}"
+
+    tg, sg = res["thumbnail_grid"], res["scene_grid"]
+    rows: list[tuple[str, str, str]] = [
+        ("GL renderer", res["gl_renderer"], res["gl_version"]),
+        ("thumbnails/s (GL)", num(res["thumbnails_per_s"]),
+         f"{res['thumbnail_size'][0]}×{res['thumbnail_size'][1]}, three-quarter, grid {tg[0]}×{tg[1]}, "
+         f"{res['thumbnail_count']} per repeat"),
+        ("thumbnails/s (matplotlib)", num(res["matplotlib_thumbnails_per_s"]),
+         f"plot_trisurf, Agg, same mesh, {res['matplotlib_thumbnail_count']} per repeat"),
+        ("thumbnail speedup", f"{num(res['thumbnail_speedup'])}×", _goal("thumbnail_speedup", res)),
+        ("leaves/s instanced (params)", num(res["instanced_leaves_per_s"]),
+         f"{res['scene_leaves']} leaves, {res['triangles_per_leaf']} tris each, "
+         f"{res['scene_size'][0]}×{res['scene_size'][1]}, one draw"),
+        ("leaves/s baked mesh", num(res["baked_leaves_per_s"]), "same triangles, one indexed draw"),
+        ("param / baked speed", f"{res['param_vs_baked_speed']:.3f}", _goal("param_vs_baked_speed", res)),
+        ("param vs baked image diff", f"{res['param_vs_baked_mean_abs_diff']:.4f}",
+         f"mean |Δ| of 8-bit RGBA, coverage {100 * res['scene_coverage']:.0f} %"),
+        ("bytes/leaf baked", f"{res['baked_bytes_per_leaf']:,}",
+         f"grid {res['bytes_grid'][0]}×{res['bytes_grid'][1]}: f32 pos+normal+uv, u32 indices"),
+        ("bytes/leaf params", f"{res['param_bytes_per_leaf']:,}", "LEAF_BLOCK record"),
+        ("baked / param bytes", f"{num(res['baked_vs_param_bytes'])}×", _goal("baked_vs_param_bytes", res)),
+        (f"leaves/s at {res['triangles_per_leaf']} tris", num(res["leaves_per_s_220tri"]),
+         f"instanced path, grid {sg[0]}×{sg[1]}"),
+        ("vs paper (550 leaves/s)", f"{num(res['vs_paper_550'])}×", _goal("vs_paper_550", res)),
+        ("machine", f"{res['cpu_count']} CPUs",
+         f"Python {res['python']}, numpy {res['numpy']}, moderngl {res['moderngl']}, "
+         f"matplotlib {res['matplotlib']}"),
+    ]
+    w0 = max(len(r[0]) for r in rows)
+    w1 = max(len(r[1]) for r in rows[1:])
+    lines = [f"leafview {res['leafview']} benchmark{' (quick)' if res['quick'] else ''}"]
+    for i, (name, value, note) in enumerate(rows):
+        if i == 0:
+            lines.append(f"{name:<{w0}}  {value}  ({note})")
+        else:
+            lines.append(f"{name:<{w0}}  {value:>{w1}}  {note}".rstrip())
+    lines.append("(timings: median of repeats, ctx.finish() before the clock stops; goals are "
+                 "reported, never asserted)")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="leafview bench", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--json", action="store_true", help="print the results as JSON")
+    parser.add_argument("--quick", action="store_true", help="a fast smoke run with small counts")
+    args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    from .gpu.context import GLUnavailable
+
+    try:
+        res = run(quick=args.quick)
+    except GLUnavailable as exc:
+        print(f"leafview bench: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(res, indent=2, allow_nan=False))
+    else:
+        print(format_table(res))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

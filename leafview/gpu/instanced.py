@@ -1,0 +1,397 @@
+"""Many leaves in one draw call: the parametric (instanced) path and its baked-mesh twin.
+
+:class:`InstancedLeaves` uploads one :data:`~leafview.gpu.layout.LEAF_BLOCK` record per leaf to a
+shader storage buffer (binding 2) and draws a single (nu × nv) grid ``N`` times with one
+instanced call; ``leaf.vert`` (built with ``LEAF_INSTANCED``) evaluates L_Ω per vertex from
+``leaves[gl_InstanceID]``.
+
+:class:`BakedLeaves` draws the *same triangles* from world-space positions and normals baked
+ahead of time, either on the CPU with the numpy reference (:meth:`BakedLeaves.from_params`,
+:func:`leafview.model.leaf.tessellate`) or captured from the instanced vertex shader
+(:meth:`BakedLeaves.from_instanced`, fast for 10⁴ leaves): one vertex buffer for all leaves
+(40 bytes a vertex), one index buffer, one draw call, ``leaf_baked.vert`` + the same ``leaf.frag``.
+
+Both are used by :mod:`leafview.benchmarks` (parameters vs baked meshes) and by the tests that
+check they draw the same picture. Neither changes the framebuffer binding: bind a target, call
+``set_camera`` and ``draw``. ``draw`` enables only the depth test.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Iterable, Sequence
+
+import moderngl
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ..camera import Camera
+from ..model.leaf import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table, tessellate
+from ..model.params import Jitter, LeafParams, Material, Shape, Transform
+from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, pack_leaf
+from .renderer import Lighting
+from .shaders import build_program
+
+__all__ = ["LEAVES_BINDING", "InstancedLeaves", "BakedLeaves", "pack_leaves", "bake_leaves",
+           "scatter_leaves", "OffscreenTarget", "read_rgba"]
+
+LEAVES_BINDING = 2  # layout(std430, binding = 2) buffer Leaves in leaf.vert
+_BAKED_FORMAT = "3f 3f 2f 4f1 4f1"  # position, normal, uv, front (rgb, translucency), back (rgb, -)
+_BAKED_ATTRS = ("in_position", "in_normal", "in_uv", "in_front", "in_back")
+BAKED_VERTEX_BYTES = 12 + 12 + 8 + 4 + 4
+
+
+# ---------------------------------------------------------------------------------------------
+# scene data (numpy only)
+def scatter_leaves(n: int, seed: int = 0, *, radius: float | None = None,
+                   jitter_fraction: float = 0.25) -> list[LeafParams]:
+    """``n`` varied leaves scattered in a ball (a crude crown): each leaf gets its own slightly
+    perturbed shape, material, rotation, scale and position; about ``jitter_fraction`` of them
+    have a serrated margin (three jitter seeds)."""
+    rng = np.random.default_rng(seed)
+    base = Shape()
+    if radius is None:
+        radius = 0.35 * max(n, 1) ** (1 / 3) + 0.5
+    out = []
+    for i in range(n):
+        d = rng.normal(size=3)
+        d /= max(np.linalg.norm(d), 1e-9)
+        pos = d * radius * rng.random() ** (1 / 3)
+        rows = tuple((vb, xs * (1.0 + 0.15 * (rng.random() - 0.5)), zs + 0.04 * (rng.random() - 0.5))
+                     for vb, xs, zs in base.silhouette)
+        shape = Shape(
+            a1=(0.06 * (rng.random() - 0.5), base.a1[1], 0.05 * (rng.random() - 0.5)),
+            a2=(0.06 * (rng.random() - 0.5), base.a2[1], 0.05 * (rng.random() - 0.5)),
+            silhouette=rows,
+            zf=tuple(float(x) for x in 0.06 * (rng.random(3) - 0.5)),
+            zg=tuple(float(x) for x in 0.06 * (rng.random(3) - 0.5)),
+        )
+        jit = Jitter(enabled=bool(rng.random() < jitter_fraction), amplitude=0.02,
+                     density=24.0, seed=int(rng.integers(0, 3)))
+        tint = 0.85 + 0.3 * rng.random()
+        mat = Material(front=tuple(float(np.clip(c * tint, 0, 1)) for c in (0.18, 0.42, 0.12)),
+                       back=tuple(float(np.clip(c * tint, 0, 1)) for c in (0.40, 0.58, 0.26)),
+                       translucency=float(0.25 + 0.2 * rng.random()))
+        tr = Transform(translation=tuple(float(x) for x in pos),
+                       rotation=(float(rng.uniform(-70, 70)), float(rng.uniform(-70, 70)),
+                                 float(rng.uniform(-180, 180))),
+                       scale=float(rng.uniform(0.3, 0.5)))
+        out.append(LeafParams(shape=shape, jitter=jit, material=mat, transform=tr, name=f"leaf{i}"))
+    return out
+
+
+def pack_leaves(params: Iterable[LeafParams]) -> tuple[NDArray[Any], NDArray[np.float32]]:
+    """LEAF_BLOCK records (N,) for ``params`` and the jitter table rows they index: one row of
+    :data:`JITTER_TABLE_SIZE` values per distinct seed among leaves with jitter on (at least one
+    row). ``record["jitter"][3]`` is the row."""
+    params = list(params)
+    recs = np.zeros(len(params), dtype=LEAF_BLOCK.dtype)
+    rows: dict[int, int] = {}
+    tables: list[NDArray[np.float32]] = []
+    for i, p in enumerate(params):
+        pack_leaf(p, recs[i])
+        if p.jitter.enabled:
+            row = rows.get(p.jitter.seed)
+            if row is None:
+                row = rows[p.jitter.seed] = len(tables)
+                tables.append(jitter_table(p.jitter))
+            recs[i]["jitter"][3] = float(row)
+    table = np.stack(tables) if tables else np.zeros((1, JITTER_TABLE_SIZE), np.float32)
+    return recs, table.astype(np.float32)
+
+
+def bake_leaves(params: Sequence[LeafParams], grid: tuple[int, int]
+                ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """World-space positions and unit normals of every grid vertex of every leaf, both
+    (N, nu·nv, 3) float32, from the numpy reference (leaves sharing shape and jitter are
+    tessellated once)."""
+    nu, nv = grid
+    n, nverts = len(params), nu * nv
+    pos = np.empty((n, nverts, 3), np.float32)
+    nrm = np.empty((n, nverts, 3), np.float32)
+    cache: dict[Any, Any] = {}
+    for i, p in enumerate(params):
+        key = (p.shape, p.jitter if p.jitter.enabled else None)
+        mesh = cache.get(key)
+        if mesh is None:
+            mesh = cache[key] = tessellate(p, nu, nv)
+        m = p.transform.matrix()
+        pos[i] = mesh.vertices @ m[:3, :3].T + m[:3, 3]
+        wn = mesh.normals @ m[:3, :3].T
+        length = np.linalg.norm(wn, axis=-1, keepdims=True)
+        nrm[i] = wn / np.where(length > 0.0, length, 1.0)
+    return pos, nrm
+
+
+# ---------------------------------------------------------------------------------------------
+# GL helpers
+class OffscreenTarget:
+    """An RGBA8 + depth framebuffer (context-managed).
+
+    ``release()`` first binds framebuffer 0: moderngl re-binds the *current* framebuffer after
+    creating a new one, so a deleted-but-current framebuffer would make the next
+    ``ctx.framebuffer()`` raise GL_INVALID_OPERATION.
+    """
+
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int], samples: int = 0) -> None:
+        self.ctx, self.size = ctx, (int(size[0]), int(size[1]))
+        self._objects: list[Any] = []
+        try:
+            color = self._own(ctx.renderbuffer(self.size, 4, samples=samples))
+            depth = self._own(ctx.depth_renderbuffer(self.size, samples=samples))
+            self.fbo = self._own(ctx.framebuffer([color], depth))
+        except BaseException:
+            self.release()
+            raise
+
+    def _own(self, obj: Any) -> Any:
+        self._objects.append(obj)
+        return obj
+
+    def use(self) -> None:
+        self.fbo.use()
+
+    def clear(self, rgba: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> None:
+        self.fbo.clear(*rgba, depth=1.0)
+
+    def read(self) -> NDArray[np.uint8]:
+        """(h, w, 4) uint8, row 0 at the top."""
+        return read_rgba(self.fbo)
+
+    def release(self) -> None:
+        if self._objects:
+            self.ctx.detect_framebuffer(0).use()
+        while self._objects:
+            self._objects.pop().release()
+
+    def __enter__(self) -> "OffscreenTarget":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def read_rgba(fbo: moderngl.Framebuffer) -> NDArray[np.uint8]:
+    """(h, w, 4) uint8, row 0 at the top."""
+    w, h = fbo.size
+    img = np.frombuffer(fbo.read(components=4), np.uint8).reshape(h, w, 4)
+    return np.ascontiguousarray(img[::-1])
+
+
+class _Batch:
+    """Shared state of the two paths: the Frame uniform block and the GL objects to release."""
+
+    program: moderngl.Program
+    vao: moderngl.VertexArray
+
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self.ctx = ctx
+        self._objects: list[Any] = []
+        self._frame = FRAME_BLOCK.zeros()
+        self.frame_ubo = self._own(ctx.buffer(reserve=FRAME_BLOCK.nbytes))
+
+    def _own(self, obj: Any) -> Any:
+        self._objects.append(obj)
+        return obj
+
+    def release(self) -> None:
+        """Release every GL object this batch created (idempotent)."""
+        while self._objects:
+            self._objects.pop().release()
+
+    def __enter__(self) -> Any:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    def set_camera(self, camera: Camera, *, srgb: bool = True, flat: bool = False,
+                   lighting: type[Lighting] = Lighting) -> None:
+        f = self._frame
+        f["view"] = camera.view.T
+        f["proj"] = camera.proj.T
+        f["eye"] = camera.eye
+        f["key"] = lighting.key
+        f["fill"] = lighting.fill
+        f["ambient"][:3] = lighting.ambient
+        f["flags"] = (int(srgb), int(flat), 0, 0)
+        self.frame_ubo.write(f.tobytes())
+
+    def _bind(self) -> None:
+        self.frame_ubo.bind_to_uniform_block(FRAME_BINDING)
+
+
+class InstancedLeaves(_Batch):
+    """All leaves from their parameters: one SSBO row each, one instanced draw of one grid.
+
+    Parameters
+    ----------
+    ctx:
+        moderngl context (OpenGL 4.5).
+    records:
+        LEAF_BLOCK records, an (N,) array of ``LEAF_BLOCK.dtype`` or a sequence of 0-d records
+        (as :func:`~leafview.gpu.layout.pack_leaf` returns).
+    grid:
+        (nu, nv) samples of the shared (u, v) grid; 2(nu-1)(nv-1) triangles per leaf.
+    jitter_tables:
+        (rows, JITTER_TABLE_SIZE) float32 jitter values indexed by ``record["jitter"][3]``
+        (see :func:`pack_leaves`); default one row of zeros.
+    """
+
+    def __init__(self, ctx: moderngl.Context, records: Any, grid: tuple[int, int] = (9, 15), *,
+                 jitter_tables: ArrayLike | None = None) -> None:
+        super().__init__(ctx)
+        try:
+            recs = self.records = _as_records(records)
+            self.count = int(recs.shape[0])
+            limit = int(ctx.info["GL_MAX_SHADER_STORAGE_BLOCK_SIZE"])
+            nbytes = max(recs.nbytes, LEAF_BLOCK.nbytes)
+            if nbytes > limit:
+                raise ValueError(
+                    f"{self.count} leaves need a {nbytes}-byte storage buffer, above this driver's "
+                    f"GL_MAX_SHADER_STORAGE_BLOCK_SIZE = {limit} bytes "
+                    f"(at most {limit // LEAF_BLOCK.nbytes} leaves per draw)")
+            self.nu, self.nv = grid
+            self.program = self._own(build_program(ctx, "leaf.vert", "leaf.frag",
+                                                   defines={"LEAF_INSTANCED": 1},
+                                                   varyings=("v_world", "v_normal")))
+            self.program["Frame"].binding = FRAME_BINDING
+            self.ssbo = self._own(ctx.buffer(recs.tobytes() if self.count else
+                                             bytes(LEAF_BLOCK.nbytes)))
+            table = (np.zeros((1, JITTER_TABLE_SIZE), np.float32) if jitter_tables is None
+                     else np.ascontiguousarray(np.atleast_2d(np.asarray(jitter_tables, np.float32))))
+            self.jitter_tex = self._own(ctx.texture((table.shape[1], table.shape[0]), 1,
+                                                    table.tobytes(), dtype="f4"))
+            self.jitter_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._vbo = self._own(ctx.buffer(grid_uv(self.nu, self.nv).tobytes()))
+            self._ibo = self._own(ctx.buffer(grid_indices(self.nu, self.nv).tobytes()))
+            self.vao = self._own(ctx.vertex_array(self.program, [(self._vbo, "2f", "in_uv")],
+                                                  index_buffer=self._ibo, index_element_size=4))
+        except BaseException:
+            self.release()
+            raise
+
+    @property
+    def triangles_per_leaf(self) -> int:
+        return 2 * (self.nu - 1) * (self.nv - 1)
+
+    def _bind(self) -> None:
+        super()._bind()
+        self.ssbo.bind_to_storage_buffer(LEAVES_BINDING)
+        self.jitter_tex.use(location=0)
+
+    def draw(self) -> None:
+        """All leaves, one instanced draw, into the bound framebuffer (depth test on)."""
+        if not self.count:
+            return
+        self.ctx.enable_only(moderngl.DEPTH_TEST)
+        self._bind()
+        self.vao.render(moderngl.TRIANGLES, instances=self.count)
+
+    def capture(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """World positions and normals of every grid vertex of every instance as the vertex
+        shader computes them (transform feedback): two (N, nu·nv, 3) float32 arrays.
+
+        A framebuffer must be bound (a surfaceless context has no default one)."""
+        nverts = self.nu * self.nv
+        if not self.count:
+            z = np.zeros((0, nverts, 3), np.float32)
+            return z, z.copy()
+        self._bind()
+        out = self.ctx.buffer(reserve=self.count * nverts * 24)
+        vao = self.ctx.vertex_array(self.program, [(self._vbo, "2f", "in_uv")])
+        try:
+            vao.transform(out, mode=moderngl.POINTS, vertices=nverts, instances=self.count)
+            data = np.frombuffer(out.read(), np.float32).reshape(self.count, nverts, 6)
+        finally:
+            vao.release()
+            out.release()
+        return data[..., :3].copy(), data[..., 3:].copy()
+
+
+class BakedLeaves(_Batch):
+    """The same triangles from pre-baked world-space vertices: one VBO, one IBO, one draw.
+
+    ``positions`` and ``normals`` are (N, nu·nv, 3) (see :func:`bake_leaves`), ``front`` (N, 4)
+    rgb + translucency and ``back`` (N, 3) per leaf; use :meth:`from_params` to build all of it.
+    """
+
+    def __init__(self, ctx: moderngl.Context, positions: ArrayLike, normals: ArrayLike,
+                 grid: tuple[int, int], front: ArrayLike, back: ArrayLike) -> None:
+        super().__init__(ctx)
+        try:
+            self.nu, self.nv = grid
+            nverts = self.nu * self.nv
+            pos = np.asarray(positions, np.float32).reshape(-1, nverts, 3)
+            nrm = np.asarray(normals, np.float32).reshape(-1, nverts, 3)
+            self.count = n = pos.shape[0]
+            if nrm.shape[0] != n:
+                raise ValueError(f"{n} leaves of positions but {nrm.shape[0]} of normals")
+            front = np.broadcast_to(np.asarray(front, np.float64).reshape(-1, 4), (n, 4))
+            back = np.broadcast_to(np.asarray(back, np.float64).reshape(-1, 3), (n, 3))
+            vdt = np.dtype([("p", "<f4", 3), ("n", "<f4", 3), ("uv", "<f4", 2),
+                            ("front", "u1", 4), ("back", "u1", 4)])
+            verts = np.empty((n, nverts), vdt)
+            verts["p"] = pos
+            verts["n"] = nrm
+            verts["uv"] = grid_uv(self.nu, self.nv)[None]
+            verts["front"] = _unorm8(front)[:, None]
+            verts["back"][..., :3] = _unorm8(back)[:, None]
+            verts["back"][..., 3] = 0
+            tris = grid_indices(self.nu, self.nv)
+            idx = (tris[None] + (np.arange(n, dtype=np.uint32) * nverts)[:, None, None])
+            self.index_count = int(idx.size)
+            self.program = self._own(build_program(ctx, "leaf_baked.vert", "leaf.frag"))
+            self.program["Frame"].binding = FRAME_BINDING
+            self.vbo = self._own(ctx.buffer(verts.tobytes() if n else bytes(vdt.itemsize)))
+            self.ibo = self._own(ctx.buffer(idx.astype(np.uint32).tobytes() if n else bytes(12)))
+            self.vao = self._own(ctx.vertex_array(self.program, [(self.vbo, _BAKED_FORMAT, *_BAKED_ATTRS)],
+                                                  index_buffer=self.ibo, index_element_size=4))
+        except BaseException:
+            self.release()
+            raise
+
+    @classmethod
+    def from_params(cls, ctx: moderngl.Context, params: Sequence[LeafParams],
+                    grid: tuple[int, int] = (9, 15)) -> "BakedLeaves":
+        pos, nrm = bake_leaves(params, grid)
+        front = [(*p.material.front, p.material.translucency) for p in params]
+        back = [p.material.back for p in params]
+        return cls(ctx, pos, nrm, grid, np.reshape(front, (-1, 4)), np.reshape(back, (-1, 3)))
+
+    @classmethod
+    def from_instanced(cls, leaves: InstancedLeaves) -> "BakedLeaves":
+        """Bake by capturing what ``leaves``' vertex shader computes (transform feedback): the
+        fast way to bake many leaves; bit-identical vertices to the instanced draw. A
+        framebuffer must be bound."""
+        pos, nrm = leaves.capture()
+        recs = leaves.records
+        return cls(leaves.ctx, pos, nrm, (leaves.nu, leaves.nv), recs["front"], recs["back"][:, :3])
+
+    @property
+    def triangles_per_leaf(self) -> int:
+        return 2 * (self.nu - 1) * (self.nv - 1)
+
+    def draw(self) -> None:
+        """All leaves, one indexed draw, into the bound framebuffer (depth test on)."""
+        if not self.count:
+            return
+        self.ctx.enable_only(moderngl.DEPTH_TEST)
+        self._bind()
+        self.vao.render(moderngl.TRIANGLES, vertices=self.index_count)
+
+
+def _unorm8(x: NDArray[np.float64]) -> NDArray[np.uint8]:
+    return np.clip(np.rint(np.asarray(x) * 255.0), 0, 255).astype(np.uint8)
+
+
+def _as_records(records: Any) -> NDArray[Any]:
+    if isinstance(records, np.ndarray) and records.dtype == LEAF_BLOCK.dtype:
+        return np.ascontiguousarray(records.reshape(-1))
+    items = list(records)
+    out = np.zeros(len(items), dtype=LEAF_BLOCK.dtype)
+    for i, r in enumerate(items):
+        r = np.asarray(r)
+        if r.dtype != LEAF_BLOCK.dtype:
+            raise TypeError(f"record {i} has dtype {r.dtype}, expected LEAF_BLOCK.dtype")
+        out[i] = r
+    return out

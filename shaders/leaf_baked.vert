@@ -1,0 +1,26 @@
+#version 450
+// Baked-mesh vertex shader: the comparison path of the benchmark (leafview/gpu/instanced.py,
+// BakedLeaves). Positions and normals arrive precomputed in world space, one vertex record per
+// leaf vertex; it writes the same outputs as leaf.vert so leaf.frag shades both identically.
+#include "generated/frame_block.glsl"
+
+in vec3 in_position;   // world space
+in vec3 in_normal;     // world space, unit, upper (front) side
+in vec2 in_uv;
+in vec4 in_front;      // rgb, translucency (normalised bytes)
+in vec4 in_back;       // rgb, unused
+
+out vec3 v_world;
+out vec3 v_normal;
+out vec2 v_uv;
+flat out vec4 v_front;
+flat out vec3 v_back;
+
+void main() {
+    v_world = in_position;
+    v_normal = in_normal;
+    v_uv = in_uv;
+    v_front = in_front;
+    v_back = in_back.rgb;
+    gl_Position = frame.proj * frame.view * vec4(in_position, 1.0);
+}

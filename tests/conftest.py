@@ -1,0 +1,82 @@
+"""Shared fixtures.
+
+GL tests use the ``gl`` fixture: without an EGL/OpenGL 4.5 context they skip only when
+``LEAFVIEW_REQUIRE_GL`` is unset; with it set (as ``.ci/run`` does) they fail. After every GL
+test the context must report GL_NO_ERROR.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import leafview
+from leafview.model.params import LeafParams
+from leafview.resources import builtin_presets
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption("--regen-images", action="store_true",
+                     help="rewrite the reference images in tests/images from the current renderer")
+
+
+def gl_required() -> bool:
+    return bool(os.environ.get("LEAFVIEW_REQUIRE_GL"))
+
+
+def _gl_unavailable(reason: str) -> None:
+    message = f"OpenGL 4.5 through EGL is unavailable: {reason}"
+    if gl_required():
+        pytest.fail(f"{message} (LEAFVIEW_REQUIRE_GL is set, so this is a failure)", pytrace=False)
+    pytest.skip(f"{message} (set LEAFVIEW_REQUIRE_GL=1 to make this a failure)")
+
+
+@pytest.fixture(scope="session")
+def _session_renderer():
+    from leafview.gpu import GLUnavailable
+
+    try:
+        renderer = leafview.gpu.default_renderer()
+    except GLUnavailable as exc:
+        renderer = None
+        reason = str(exc)
+    yield renderer if renderer is not None else reason
+
+
+@pytest.fixture
+def gl(_session_renderer):
+    """The shared headless :class:`LeafRenderer`; asserts GL_NO_ERROR after the test."""
+    if isinstance(_session_renderer, str):
+        _gl_unavailable(_session_renderer)
+    renderer = _session_renderer
+    assert renderer.ctx.error == "GL_NO_ERROR", "a GL error was pending before this test"
+    yield renderer
+    assert renderer.ctx.error == "GL_NO_ERROR"
+
+
+@pytest.fixture(scope="session")
+def presets() -> dict[str, LeafParams]:
+    return {name: LeafParams.load(path) for name, path in builtin_presets().items()}
+
+
+def random_params(rng: np.random.Generator, *, jitter: bool = False) -> LeafParams:
+    """A random but plausible Ω: bent, skewed, curled axis; silhouette rows with increasing v̄."""
+    a1 = [rng.uniform(-0.2, 0.2), rng.uniform(0.15, 0.5), rng.uniform(-0.2, 0.2)]
+    a2 = [rng.uniform(-0.2, 0.2), rng.uniform(0.5, 0.85), rng.uniform(-0.2, 0.2)]
+    v = np.sort(rng.uniform(0.05, 0.95, 3))
+    v[1] = max(v[1], v[0] + 0.02)
+    v[2] = min(max(v[2], v[1] + 0.02), 0.99)
+    rows = [[v[i], rng.uniform(0.02, 0.7), rng.uniform(-0.15, 0.15)] for i in range(3)]
+    omega = np.r_[a1, a2, np.ravel(rows), rng.uniform(-0.15, 0.15, 6)]
+    params = LeafParams.from_vector(omega)
+    if jitter:
+        from leafview.model.params import Jitter
+
+        params = params.replace(jitter=Jitter(enabled=True, amplitude=rng.uniform(0.005, 0.08),
+                                              density=rng.uniform(3, 90), seed=int(rng.integers(0, 1000))))
+    return params

@@ -1,0 +1,123 @@
+"""The rendering vertex shader, read back through transform feedback, against the numpy
+reference; the parameter layout against the linked program's reflection."""
+
+import numpy as np
+import pytest
+
+import leafview
+from leafview.gpu.layout import FRAME_BLOCK, LEAF_BLOCK, pack_leaf
+from leafview.model.leaf import grid_uv
+from leafview.model.params import Jitter
+from tests.conftest import random_params
+
+pytestmark = pytest.mark.gl
+TOL = 2e-5
+
+
+@pytest.mark.parametrize("jitter", [False, True], ids=["jitter-off", "jitter-on"])
+def test_readback_matches_reference_on_random_leaves(gl, jitter):
+    rng = np.random.default_rng(100 + jitter)
+    worst = 0.0
+    for _ in range(60):
+        params = random_params(rng, jitter=jitter)
+        u = np.r_[rng.uniform(-1, 1, 400), -1, 1, 0, 0.5]
+        v = np.r_[rng.uniform(0, 1, 400), 0.5, 0.5, 1, 0]
+        gpu = leafview.gpu.evaluate(params, u, v)
+        assert gpu.dtype == np.float32 and gpu.shape == (404, 3)
+        worst = max(worst, float(np.abs(gpu - leafview.evaluate(params, u, v)).max()))
+    assert worst <= TOL, f"largest GPU/CPU difference {worst:.3g} > {TOL}"
+
+
+def test_readback_on_the_render_grid_and_normals(gl, presets):
+    uv = grid_uv(33, 65)
+    for name, params in presets.items():
+        pos, nrm = gl.capture(params, uv[:, 0], uv[:, 1])
+        np.testing.assert_allclose(pos, leafview.evaluate(params, uv[:, 0], uv[:, 1]), atol=TOL, err_msg=name)
+        ref = leafview.normals(params, uv[:, 0], uv[:, 1])
+        cos = np.sum(nrm * ref, axis=1)
+        assert cos.min() > 1 - 1e-4, f"{name}: normal off by {np.degrees(np.arccos(cos.min())):.3f}°"
+
+
+def test_jitter_changes_reach_the_shader(gl):
+    base = leafview.LeafParams()
+    u, v = np.ones(50), np.linspace(0.1, 0.9, 50)
+    a = leafview.gpu.evaluate(base.replace(jitter=Jitter(enabled=True, amplitude=0.05, seed=1)), u, v)
+    b = leafview.gpu.evaluate(base.replace(jitter=Jitter(enabled=True, amplitude=0.05, seed=2)), u, v)
+    c = leafview.gpu.evaluate(base.replace(jitter=Jitter(enabled=True, amplitude=0.02, seed=2)), u, v)
+    assert np.abs(a - b).max() > 1e-3 and np.abs(b - c).max() > 1e-3
+
+
+def test_amplitude_and_density_update_only_the_uniform_block(gl):
+    p = leafview.LeafParams().replace(jitter=Jitter(enabled=True, seed=42))
+    gl.set_leaf(p)
+    before = gl.uploads
+    for amp, dens in ((0.01, 10.0), (0.05, 80.0), (0.03, 33.0)):
+        gl.set_leaf(p.replace(jitter=Jitter(enabled=True, seed=42, amplitude=amp, density=dens)))
+    assert gl.uploads - before == 3 * LEAF_BLOCK.nbytes  # no texture, no geometry re-uploaded
+    assert LEAF_BLOCK.nbytes < 1024
+
+
+def test_blocks_match_reflection(gl):
+    assert gl.program["Leaf"].size == LEAF_BLOCK.nbytes
+    assert gl.program["Frame"].size == FRAME_BLOCK.nbytes
+
+
+def _flatten_glsl(var: str) -> str:
+    """GLSL that writes every member of ``var`` (a LeafData) to data[] in declaration order."""
+    lines, k = [], 1
+    for name, glsl, count in LEAF_BLOCK.members:
+        assert count == 1
+        idx = [f"[{i}]" for i in range(4)] if glsl != "mat4" else [f"[{c}][{r}]" for c in range(4) for r in range(4)]
+        for i in idx:
+            lines.append(f"data[OFS + {k}] = float({var}.{name}{i});")
+            k += 1
+    return "\n".join(lines)
+
+
+def test_every_member_offset_matches_std140_and_std430(gl, tmp_path):
+    """A compute shader copies each member of the uniform block and of storage row 1 out; the
+    floats must come back in exactly the order of the numpy dtype (so every offset agrees)."""
+    from leafview.gpu.shaders import build_compute
+
+    n_floats = LEAF_BLOCK.nbytes // 4
+    (tmp_path / "probe.comp").write_text(
+        "#version 450\nlayout(local_size_x = 1) in;\n#include \"generated/leaf_block.glsl\"\n"
+        "layout(std430, binding = 2) readonly buffer Leaves { LeafData leaves[]; };\n"
+        "layout(std430, binding = 3) writeonly buffer Out { float data[]; };\n"
+        "void main() {\n  data[0] = float(leaves.length());\n"
+        f"#define OFS 0\n{_flatten_glsl('leaf')}\n#undef OFS\n#define OFS {n_floats}\n{_flatten_glsl('leaves[1]')}\n}}\n")
+    rng = np.random.default_rng(9)
+    rows = np.zeros(3, dtype=LEAF_BLOCK.dtype)
+    rows.view(np.float32)[:] = rng.normal(size=3 * n_floats).astype(np.float32)
+    ubo_rec = pack_leaf(random_params(rng, jitter=True))
+    shader = build_compute(gl.ctx, "probe.comp", root=tmp_path)
+    ubo = gl.ctx.buffer(ubo_rec.tobytes())
+    ssbo = gl.ctx.buffer(rows.tobytes())
+    out = gl.ctx.buffer(reserve=4 * (1 + 2 * n_floats))
+    try:
+        ubo.bind_to_uniform_block(0)
+        ssbo.bind_to_storage_buffer(2)
+        out.bind_to_storage_buffer(3)
+        shader.run(1)
+        data = np.frombuffer(out.read(), dtype=np.float32)
+    finally:
+        for obj in (shader, ubo, ssbo, out):
+            obj.release()
+    assert data[0] == 3  # leaves.length() = buffer bytes / row stride: stride == LEAF_BLOCK.nbytes
+    np.testing.assert_array_equal(data[1:1 + n_floats], np.frombuffer(ubo_rec.tobytes(), np.float32))
+    np.testing.assert_array_equal(data[1 + n_floats:], rows[1:2].view(np.float32))
+
+
+def test_pack_leaf_fields():
+    p = leafview.LeafParams().replace(jitter=Jitter(enabled=False, amplitude=0.05))
+    rec = pack_leaf(p)
+    assert rec.dtype.itemsize == LEAF_BLOCK.nbytes
+    assert rec["jitter"][0] == 0.0  # jitter off means amplitude 0 on the GPU
+    np.testing.assert_allclose(rec["vbar"][:3], p.shape.vbar, atol=1e-7)
+    np.testing.assert_allclose(rec["model"].T, p.transform.matrix(), atol=1e-7)
+
+
+def test_generated_glsl_declares_every_member():
+    text = LEAF_BLOCK.glsl(0)
+    for name, glsl, _ in LEAF_BLOCK.members:
+        assert f"{glsl} {name};" in text
