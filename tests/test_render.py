@@ -44,7 +44,7 @@ def test_top_view_orientation_plus_y_up(gl, presets):
         rows = np.nonzero(widths)[0]
         widest_row = rows[np.argmax(widths[rows])]
         frac_from_bottom = (rows.max() - widest_row) / (rows.max() - rows.min())
-        assert abs(frac_ref - 0.5) > 0.2, name  # a flipped image would read 1 - frac_ref
+        assert abs(frac_ref - 0.5) > 0.15, name  # a flipped image would read 1 - frac_ref
         assert frac_from_bottom == pytest.approx(frac_ref, abs=0.1), name
 
 
