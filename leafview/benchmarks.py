@@ -116,12 +116,14 @@ def _mpl_thumbnail(params: Any) -> np.ndarray:
     fig = Figure(figsize=(THUMB_SIZE[0] / 100, THUMB_SIZE[1] / 100), dpi=100)
     canvas = FigureCanvasAgg(fig)
     ax = fig.add_axes((0.0, 0.0, 1.0, 1.0), projection="3d")
-    ax.plot_trisurf(p[:, 0], p[:, 1], p[:, 2], triangles=mesh.indices, color=params.material.front,
+    front = np.asarray(params.material.front)
+    srgb = np.where(front <= 0.0031308, 12.92 * front, 1.055 * front ** (1 / 2.4) - 0.055)
+    ax.plot_trisurf(p[:, 0], p[:, 1], p[:, 2], triangles=mesh.indices, color=tuple(srgb),
                     linewidth=0, antialiased=False, shade=True)
     lo, hi = p.min(axis=0), p.max(axis=0)
     c, r = (lo + hi) / 2, max(float((hi - lo).max()) / 2, 1e-6)  # equal axes, like the GL camera
     ax.set_xlim(c[0] - r, c[0] + r), ax.set_ylim(c[1] - r, c[1] + r), ax.set_zlim(c[2] - r, c[2] + r)
-    ax.set_box_aspect((1, 1, 1))
+    ax.set_box_aspect((1, 1, 1), zoom=1.6)  # mplot3d leaves wide margins by default
     ax.view_init(elev=35, azim=-55)  # the three-quarter view: 35° towards +x from -y, 35° up
     ax.set_axis_off()
     canvas.draw()
@@ -178,8 +180,12 @@ def _scene(ctx: Any, n_leaves: int, repeats: int, progress: _Progress) -> dict[s
             "coverage": float((images[0][..., 3] > 0).mean()), "triangles_per_leaf": tris}
 
 
-def run(quick: bool = False) -> dict[str, Any]:
+def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
     """Run every benchmark in this process; returns a flat dict (see the module docstring).
+
+    ``ctx``: an existing moderngl context to measure on (kept open); default a new headless
+    one, released at the end. Pass the context already in use when the process has one:
+    creating a second standalone context makes it current behind the first one's back.
 
     Keys: ``gl_renderer``, ``thumbnails_per_s``, ``matplotlib_thumbnails_per_s``,
     ``thumbnail_speedup``, ``param_vs_baked_speed`` (+ ``instanced_leaves_per_s``,
@@ -198,7 +204,9 @@ def run(quick: bool = False) -> dict[str, Any]:
     cfg = _CONFIG[bool(quick)]
     progress = _Progress(6)
     res: dict[str, Any] = {}
-    ctx = create_headless_context()
+    own_ctx = ctx is None
+    if own_ctx:
+        ctx = create_headless_context()
     try:
         res["gl_renderer"] = str(ctx.info["GL_RENDERER"])
         res["gl_version"] = str(ctx.info["GL_VERSION"])
@@ -263,7 +271,8 @@ def run(quick: bool = False) -> dict[str, Any]:
         res["vs_paper_550"] = res["leaves_per_s_220tri"] / PAPER_LEAVES_PER_S
     finally:
         progress.close()
-        ctx.release()
+        if own_ctx:
+            ctx.release()
 
     res.update({
         "quick": bool(quick),
@@ -345,6 +354,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
     from .gpu.context import GLUnavailable
 
+    try:
+        import matplotlib  # noqa: F401  (the thumbnail baseline)
+    except ImportError:
+        print("leafview bench: matplotlib is needed for the baseline: pip install 'leafview[bench]'",
+              file=sys.stderr)
+        return 2
     try:
         res = run(quick=args.quick)
     except GLUnavailable as exc:

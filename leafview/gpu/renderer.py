@@ -92,12 +92,16 @@ class LeafRenderer:
         self._frame = FRAME_BLOCK.zeros()
         self._grids = _LRU(_MAX_CACHED)
         self._targets = _LRU(_MAX_CACHED)
+        self._capture_fbo: moderngl.Framebuffer | None = None
         self.uploads = 0  # bytes written to GPU buffers/textures by set_leaf (for edit-cost tests)
 
     # -- lifetime -------------------------------------------------------------------------------
     def release(self) -> None:
         self._grids.clear_all()
         self._targets.clear_all()
+        if self._capture_fbo is not None:
+            _release([self._capture_fbo, *self._capture_fbo.color_attachments])
+            self._capture_fbo = None
         _release([self.program, self.leaf_ubo, self.frame_ubo, self.jitter_tex])
         if self._owns_ctx:
             self.ctx.release()
@@ -223,7 +227,9 @@ class LeafRenderer:
         self._bind()
         # a surfaceless EGL context has no default framebuffer; draws (even with rasterizer
         # discard) need a complete one bound, else GL_INVALID_FRAMEBUFFER_OPERATION
-        self._target(1, 1, 0, False)[0].use()
+        if self._capture_fbo is None:
+            self._capture_fbo = self.ctx.framebuffer([self.ctx.renderbuffer((1, 1), 4)])
+        self._capture_fbo.use()
         vbo = self.ctx.buffer(uv.tobytes())
         out = self.ctx.buffer(reserve=n * 24)
         vao = self.ctx.vertex_array(self.program, [(vbo, "2f", "in_uv")])

@@ -1,0 +1,19 @@
+#!/usr/bin/env python3
+"""Run the leafview benchmark (the same as ``leafview bench``).
+
+Usage, from the repository root with leafview installed (``pip install -e .[bench]``)::
+
+    python bench/run_bench.py            # readable table (full run, well under a minute)
+    python bench/run_bench.py --json     # the results as JSON
+    python bench/run_bench.py --quick    # small counts: a smoke run of a few seconds
+
+Needs OpenGL 4.5 through EGL (Mesa llvmpipe works without a GPU) and matplotlib for the
+baseline. Numbers are timings on *this* machine; the GL renderer is printed with them.
+"""
+
+import sys
+
+from leafview.benchmarks import main
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
