@@ -49,8 +49,8 @@ GOALS = {
 
 _CONFIG = {
     # thumbnail params, passes over them per repeat, repeats, matplotlib repeats, scene leaves, repeats
-    False: dict(thumb_params=4, thumb_passes=4, thumb_repeats=5, mpl_passes=2, mpl_repeats=3,
-                leaves=10_000, scene_repeats=7),
+    False: dict(thumb_params=4, thumb_passes=4, thumb_repeats=5, mpl_passes=2, mpl_repeats=5,
+                leaves=10_000, scene_repeats=9),
     True: dict(thumb_params=2, thumb_passes=1, thumb_repeats=2, mpl_passes=1, mpl_repeats=2,
                leaves=300, scene_repeats=2),
 }

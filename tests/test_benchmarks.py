@@ -64,7 +64,7 @@ def test_bake_leaves_matches_tessellate():
 def _scene(n: int = 6, seed: int = 2):
     from leafview.gpu.instanced import pack_leaves, scatter_leaves
 
-    params = scatter_leaves(n, seed=seed, radius=0.45, jitter_fraction=0.5)
+    params = scatter_leaves(n, seed=seed, radius=0.2, jitter_fraction=0.5)
     recs, table = pack_leaves(params)
     return params, recs, table
 
@@ -90,7 +90,7 @@ def test_instanced_and_baked_draw_the_same_picture(gl):
             images.append(target.read())
     a, b = images
     cover_a, cover_b = (a[..., 3] > 0).mean(), (b[..., 3] > 0).mean()
-    assert cover_a > 0.05, "the leaves should fill a good part of the image"
+    assert cover_a > 0.03, "the leaves should fill a good part of the image"
     assert abs(cover_a - cover_b) < 0.002
     diff = np.abs(a.astype(np.int16) - b.astype(np.int16))
     assert diff.mean() < 0.5, diff.mean()
@@ -148,19 +148,13 @@ def test_too_many_leaves_for_the_storage_buffer(gl):
     _no_error(gl.ctx, "release")
 
 
-@pytest.fixture(scope="module")
-def quick_results(_session_renderer):
-    if isinstance(_session_renderer, str):
-        pytest.skip("no GL")  # the gl-marked tests below report skip/fail through `gl`
-    from leafview.benchmarks import run
+@pytest.mark.gl
+def test_quick_run_reports_every_key(gl):
+    from leafview.benchmarks import format_table, run
 
     # share the session context: a second standalone context would become current behind it
-    return run(quick=True, ctx=_session_renderer.ctx)
-
-
-@pytest.mark.gl
-def test_quick_run_reports_every_key(gl, quick_results):
-    res = quick_results
+    res = run(quick=True, ctx=gl.ctx)
+    _no_error(gl.ctx, "benchmark")
     for key in NUMERIC_KEYS:
         value = res[key]
         assert isinstance(value, (int, float)) and not isinstance(value, bool), key
@@ -175,12 +169,7 @@ def test_quick_run_reports_every_key(gl, quick_results):
         assert res[key]
     json.dumps(res, allow_nan=False)
 
-
-@pytest.mark.gl
-def test_table_names_renderer_and_goals(gl, quick_results):
-    from leafview.benchmarks import format_table
-
-    text = format_table(quick_results)
-    assert quick_results["gl_renderer"] in text
+    text = format_table(res)
+    assert res["gl_renderer"] in text
     for label in ("thumbnail speedup", "param / baked speed", "baked / param bytes", "vs paper"):
         assert label in text

@@ -80,6 +80,14 @@ def test_validation_names_the_field(mutate, path, words):
     assert re.fullmatch(path + r".*", info.value.path), info.value.path
 
 
+def test_messages_show_plain_numbers():
+    d = LeafParams().to_dict()
+    d["shape"]["silhouette"][1][0] = 0.1
+    with pytest.raises(ParamError) as info:
+        parse_params(d)
+    assert "np." not in str(info.value) and "0.25 then 0.1" in str(info.value)
+
+
 def test_empty_document():
     with pytest.raises(ParamError, match="empty"):
         parse_params({})

@@ -313,7 +313,7 @@ def _parse_group(cls: type, data: Any, group: str, *, required: bool) -> Any:
 
 
 def _check_shape(shape: Shape) -> None:
-    v = shape.vbar
+    v = [float(row[0]) for row in shape.silhouette]
     for i, x in enumerate(v):
         if not 0.0 < x < 1.0:
             raise ParamError(f"shape.silhouette[{i}][0]", f"v̄ = {x!r} must lie strictly inside (0, 1)")
