@@ -165,43 +165,47 @@ def _render(args: argparse.Namespace) -> int:
     linear = fmt == "exr"
     started = time.perf_counter()
 
-    def draw(leaf: LeafParams):
-        return renderer.render(leaf, (args.size, args.size), args.view, linear=linear, **kwargs)
+    def draw_all(batch: list[LeafParams]) -> list:
+        return renderer.render_many(batch, (args.size, args.size), args.view, linear=linear, **kwargs)
 
     if mode == "file":
-        write_image(out, draw(leaves[0]), params=leaves[0], description=_describe(leaves[0], args))
+        image = draw_all(leaves[:1])[0]
+        write_image(out, image, params=leaves[0], description=_describe(leaves[0], args))
         _report(args, f"wrote {out} ({args.size}×{args.size}, {args.view} view, {names[0]})")
         return EXIT_OK
 
     from tqdm import tqdm
 
+    from .gpu.renderer import BATCH
+
     bar = tqdm(total=len(leaves), unit="leaf", disable=None if not args.quiet else True, file=sys.stderr,
                desc="rendering")
-    if mode == "sheet":
-        images = []
-        for leaf in leaves:
-            images.append(draw(leaf))
-            bar.update()
-        bar.close()
-        write_image(out, contact_sheet(images, names), description=f"leafview contact sheet: {', '.join(names)}")
-        _report(args, f"wrote {out}: contact sheet of {len(leaves)} leaves ({args.view} view) "
-                      f"in {time.perf_counter() - started:.1f} s")
-        return EXIT_OK
-
     written: list[Path] = []
+    images = []
     try:
-        for leaf, name in zip(leaves, names):
-            written.append(write_image(out / f"{name}{FORMATS[fmt]}", draw(leaf), params=leaf,
-                                       description=_describe(leaf, args)))
-            bar.update()
+        for start in range(0, len(leaves), BATCH):
+            chunk = leaves[start:start + BATCH]
+            rendered = draw_all(chunk)
+            if mode == "sheet":
+                images += rendered
+            else:
+                for leaf, name, image in zip(chunk, names[start:start + BATCH], rendered):
+                    written.append(write_image(out / f"{name}{FORMATS[fmt]}", image, params=leaf,
+                                               description=_describe(leaf, args)))
+            bar.update(len(chunk))
     except BaseException:
         for path in written:  # a failed batch leaves no half-finished directory behind
             path.unlink(missing_ok=True)
         raise
     finally:
         bar.close()
-    _report(args, f"wrote {len(written)} {fmt} thumbnails ({args.size}×{args.size}, {args.view} view) to {out}/ "
-                  f"in {time.perf_counter() - started:.1f} s")
+    seconds = time.perf_counter() - started
+    if mode == "sheet":
+        write_image(out, contact_sheet(images, names), description=f"leafview contact sheet: {', '.join(names)}")
+        _report(args, f"wrote {out}: contact sheet of {len(leaves)} leaves ({args.view} view) in {seconds:.1f} s")
+    else:
+        _report(args, f"wrote {len(written)} {fmt} thumbnails ({args.size}×{args.size}, {args.view} view) "
+                      f"to {out}/ in {seconds:.1f} s")
     return EXIT_OK
 
 

@@ -21,42 +21,56 @@ vec3 axis_normal(vec3 d) {
     return m / length(m);
 }
 
+// Evaluation strategy (exactly eqs 3-6, rearranged; the numpy reference in leafview/model/leaf.py
+// implements the equations literally and the readback test compares the two):
+// S, F and G for side sigma share the axis points A(v̄_i) and differ only in the fraction of
+// x̄_i n(v̄_i) (1, 1/3, 2/3) and in their heights. With P the quartic through (0, A(v̄_1..3), apex),
+// Q the quartic through (0, x̄_i n(v̄_i), 0) and zS, zF, zG the scalar quartics of the heights:
+//   S = P + sigma Q + zS z,  F = P + sigma Q / 3 + zF z,  G = P + 2 sigma Q / 3 + zG z.
+// The cubic Bernstein basis has linear precision, sum_k (k/3) B_k(s) = s, so eq. 6 becomes
+//   L(u, v) = B_0(s) A(v) + (1 - B_0(s)) P(v) + u Q(v) + (B_1 zF + B_2 zG + B_3 zS) z
+// two vector quartics per vertex instead of six.
 LeafEval leaf_eval(LeafData d, sampler2D jitter_tex, vec2 uv) {
     float u = uv.x, v = uv.y;
     float sigma = u >= 0.0 ? 1.0 : -1.0;
     float s = abs(u);
     vec3 a1 = d.a1.xyz, a2 = d.a2.xyz;
 
-    // control points of S, F, G for this side (eqs 3, 4a, 4b)
-    vec3 S[3], F[3], G[3];
-    for (int i = 0; i < 3; ++i) {
-        float vb = d.vbar[i];
-        vec3 A = cubic(LEAF_BASE, a1, a2, LEAF_APEX, vb);
-        vec3 n = axis_normal(cubic_dt(LEAF_BASE, a1, a2, LEAF_APEX, vb));
-        float x = sigma * d.xs[i];
-        S[i] = A + x * n + vec3(0.0, 0.0, d.zs[i]);
-        F[i] = A + (1.0 / 3.0) * x * n + vec3(0.0, 0.0, d.zf[i]);
-        G[i] = A + (2.0 / 3.0) * x * n + vec3(0.0, 0.0, d.zg[i]);
-    }
+    // the axis points A(v̄_i) and scaled in-plane normals x̄s_i n(v̄_i) of eqs 3-4: per-leaf
+    // constants, filled in by leaf_prepare.comp before any draw
+    vec4 k1 = d.axis[0], k2 = d.axis[1], k3 = d.axis[2];
+    vec4 h1 = d.heights[0], h2 = d.heights[1], h3 = d.heights[2];
+    vec3 P1 = k1.xyz, P2 = k2.xyz, P3 = k3.xyz;
+    vec3 Q1 = vec3(k1.w, h1.w, 0.0), Q2 = vec3(k2.w, h2.w, 0.0), Q3 = vec3(k3.w, h3.w, 0.0);
+    vec3 zf = vec3(h1.x, h2.x, h3.x), zg = vec3(h1.y, h2.y, h3.y), zs = vec3(h1.z, h2.z, h3.z);
 
-    // the four longitudinal curves at v (eq. 5) and their v-derivatives
-    vec3 c0 = cubic(LEAF_BASE, a1, a2, LEAF_APEX, v);
-    vec3 c1 = quartic(LEAF_BASE, F[0], F[1], F[2], LEAF_APEX, v);
-    vec3 c2 = quartic(LEAF_BASE, G[0], G[1], G[2], LEAF_APEX, v);
-    vec3 c3 = quartic(LEAF_BASE, S[0], S[1], S[2], LEAF_APEX, v);
-    vec3 d0 = cubic_dt(LEAF_BASE, a1, a2, LEAF_APEX, v);
-    vec3 d1 = quartic_dt(LEAF_BASE, F[0], F[1], F[2], LEAF_APEX, v);
-    vec3 d2 = quartic_dt(LEAF_BASE, G[0], G[1], G[2], LEAF_APEX, v);
-    vec3 d3 = quartic_dt(LEAF_BASE, S[0], S[1], S[2], LEAF_APEX, v);
+    // quartic weights at v for the inner points (the base is the origin, so it drops out) and
+    // the apex, and their v-derivatives
+    float t = 1.0 - v, v2 = v * v, t2 = t * t;
+    vec3 w = vec3(4.0 * t2 * t * v, 6.0 * t2 * v2, 4.0 * t * v2 * v);
+    float w_apex = v2 * v2;
+    vec4 b3 = bernstein3(v);  // quartic derivative weights: 4 (B3_{i-1} - B3_i)
+    vec3 dw = 4.0 * (b3.xyz - b3.yzw);
+    float dw_apex = 4.0 * b3.w;
 
-    // cross-section cubic C_v sampled at s = |u| (eq. 6)
+    vec3 Pv = w.x * P1 + w.y * P2 + w.z * P3 + w_apex * LEAF_APEX;
+    vec3 Qv = w.x * Q1 + w.y * Q2 + w.z * Q3;
+    vec3 dPv = dw.x * P1 + dw.y * P2 + dw.z * P3 + dw_apex * LEAF_APEX;
+    vec3 dQv = dw.x * Q1 + dw.y * Q2 + dw.z * Q3;
+    vec3 z = vec3(dot(w, zf), dot(w, zg), dot(w, zs));      // zF, zG, zS at v
+    vec3 dz = vec3(dot(dw, zf), dot(dw, zg), dot(dw, zs));
+
+    vec3 Av = cubic(LEAF_BASE, a1, a2, LEAF_APEX, v);
+    vec3 dAv = cubic_dt(LEAF_BASE, a1, a2, LEAF_APEX, v);
+
+    // cross-section cubic at s = |u| (eqs 5-6), rearranged as above
     vec4 b = bernstein3(s);
     vec4 db = bernstein3_dt(s);
     LeafEval e;
-    e.L = b.x * c0 + b.y * c1 + b.z * c2 + b.w * c3;
-    e.Lu = sigma * (db.x * c0 + db.y * c1 + db.z * c2 + db.w * c3);
-    e.Lv = b.x * d0 + b.y * d1 + b.z * d2 + b.w * d3;
-    e.Luv = sigma * (db.x * d0 + db.y * d1 + db.z * d2 + db.w * d3);
+    e.L = b.x * Av + (1.0 - b.x) * Pv + u * Qv + vec3(0.0, 0.0, dot(b.yzw, z));
+    e.Lu = sigma * db.x * (Av - Pv) + Qv + vec3(0.0, 0.0, sigma * dot(db.yzw, z));
+    e.Lv = b.x * dAv + (1.0 - b.x) * dPv + u * dQv + vec3(0.0, 0.0, dot(b.yzw, dz));
+    e.Luv = sigma * db.x * (dAv - dPv) + dQv + vec3(0.0, 0.0, sigma * dot(db.yzw, dz));
 
     // jittered silhouette (sec. 6): D = amp j(v) s^2 tau(v) sigma n(v)
     float amp = d.jitter.x;
@@ -75,7 +89,7 @@ LeafEval leaf_eval(LeafData d, sampler2D jitter_tex, vec2 uv) {
         float w3 = w * w * w;
         float tau = 1.0 - w3 * w, dtau = -8.0 * w3;
 
-        vec3 m = vec3(-d0.y, d0.x, 0.0);
+        vec3 m = vec3(-dAv.y, dAv.x, 0.0);
         vec3 a_dd = cubic_dt2(LEAF_BASE, a1, a2, LEAF_APEX, v);
         vec3 dm = vec3(-a_dd.y, a_dd.x, 0.0);
         float mlen = length(m);

@@ -66,8 +66,9 @@ def _flatten_glsl(var: str) -> str:
     """GLSL that writes every member of ``var`` (a LeafData) to data[] in declaration order."""
     lines, k = [], 1
     for name, glsl, count in LEAF_BLOCK.members:
-        assert count == 1
         idx = [f"[{i}]" for i in range(4)] if glsl != "mat4" else [f"[{c}][{r}]" for c in range(4) for r in range(4)]
+        if count > 1:
+            idx = [f"[{k}]{i}" for k in range(count) for i in idx]
         for i in idx:
             lines.append(f"data[OFS + {k}] = float({var}.{name}{i});")
             k += 1
@@ -108,6 +109,34 @@ def test_every_member_offset_matches_std140_and_std430(gl, tmp_path):
     np.testing.assert_array_equal(data[1 + n_floats:], rows[1:2].view(np.float32))
 
 
+def test_prepare_pass_matches_reference(gl):
+    """leaf_prepare.comp writes A(v̄_i), x̄s_i n(v̄_i) (eqs 2-4) and the heights into each row."""
+    from leafview.gpu.layout import pack_leaves
+    from leafview.model.leaf import axis_frames
+
+    rng = np.random.default_rng(21)
+    leaves = [random_params(rng) for _ in range(70)]  # more than one 64-wide work group
+    records, _ = pack_leaves(leaves)
+    assert not records["axis"].any() and not records["heights"].any()  # the GPU fills them
+    buf = gl.ctx.buffer(records.tobytes())
+    try:
+        gl.prepare.run(buf, len(leaves))
+        out = np.frombuffer(buf.read(), dtype=LEAF_BLOCK.dtype)
+    finally:
+        buf.release()
+    for rec, leaf in zip(out, leaves):
+        p, q = axis_frames(leaf)
+        np.testing.assert_allclose(rec["axis"][:, :3], p, atol=2e-6)
+        np.testing.assert_allclose(rec["axis"][:, 3], q[:, 0], atol=2e-6)
+        np.testing.assert_allclose(rec["heights"][:, 3], q[:, 1], atol=2e-6)
+        assert not q[:, 2].any()  # the in-plane normal has no z (eq. 2): two numbers suffice
+        s = leaf.shape
+        np.testing.assert_array_equal(rec["heights"][:, :3], np.float32(np.c_[s.zf, s.zg, s.zs]))
+    rest = [name for name, _, _ in LEAF_BLOCK.members if name not in ("axis", "heights")]
+    for name in rest:  # and touches nothing else
+        np.testing.assert_array_equal(out[name], records[name])
+
+
 def test_pack_leaf_fields():
     p = leafview.LeafParams().replace(jitter=Jitter(enabled=False, amplitude=0.05))
     rec = pack_leaf(p)
@@ -119,5 +148,5 @@ def test_pack_leaf_fields():
 
 def test_generated_glsl_declares_every_member():
     text = LEAF_BLOCK.glsl(0)
-    for name, glsl, _ in LEAF_BLOCK.members:
-        assert f"{glsl} {name};" in text
+    for name, glsl, count in LEAF_BLOCK.members:
+        assert f"{glsl} {name}{'' if count == 1 else f'[{count}]'};" in text

@@ -27,14 +27,14 @@ from numpy.typing import ArrayLike, NDArray
 from ..camera import Camera
 from ..model.leaf import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table, tessellate
 from ..model.params import Jitter, LeafParams, Material, Shape, Transform
-from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, pack_leaf
+from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, LEAVES_BINDING, pack_leaf, pack_leaves
+from .prepare import LeafPrepare
 from .renderer import Lighting
 from .shaders import build_program
 
 __all__ = ["LEAVES_BINDING", "InstancedLeaves", "BakedLeaves", "pack_leaves", "bake_leaves",
            "scatter_leaves", "OffscreenTarget", "read_rgba"]
 
-LEAVES_BINDING = 2  # layout(std430, binding = 2) buffer Leaves in leaf.vert
 _BAKED_FORMAT = "3f 3f 2f 4f1 4f1"  # position, normal, uv, front (rgb, translucency), back (rgb, -)
 _BAKED_ATTRS = ("in_position", "in_normal", "in_uv", "in_front", "in_back")
 BAKED_VERTEX_BYTES = 12 + 12 + 8 + 4 + 4
@@ -77,26 +77,6 @@ def scatter_leaves(n: int, seed: int = 0, *, radius: float | None = None,
                        scale=float(rng.uniform(0.3, 0.5)))
         out.append(LeafParams(shape=shape, jitter=jit, material=mat, transform=tr, name=f"leaf{i}"))
     return out
-
-
-def pack_leaves(params: Iterable[LeafParams]) -> tuple[NDArray[Any], NDArray[np.float32]]:
-    """LEAF_BLOCK records (N,) for ``params`` and the jitter table rows they index: one row of
-    :data:`JITTER_TABLE_SIZE` values per distinct seed among leaves with jitter on (at least one
-    row). ``record["jitter"][3]`` is the row."""
-    params = list(params)
-    recs = np.zeros(len(params), dtype=LEAF_BLOCK.dtype)
-    rows: dict[int, int] = {}
-    tables: list[NDArray[np.float32]] = []
-    for i, p in enumerate(params):
-        pack_leaf(p, recs[i])
-        if p.jitter.enabled:
-            row = rows.get(p.jitter.seed)
-            if row is None:
-                row = rows[p.jitter.seed] = len(tables)
-                tables.append(jitter_table(p.jitter))
-            recs[i]["jitter"][3] = float(row)
-    table = np.stack(tables) if tables else np.zeros((1, JITTER_TABLE_SIZE), np.float32)
-    return recs, table.astype(np.float32)
 
 
 def bake_leaves(params: Sequence[LeafParams], grid: tuple[int, int]
@@ -257,6 +237,8 @@ class InstancedLeaves(_Batch):
             self.program["Frame"].binding = FRAME_BINDING
             self.ssbo = self._own(ctx.buffer(recs.tobytes() if self.count else
                                              bytes(LEAF_BLOCK.nbytes)))
+            prepare = self._own(LeafPrepare(ctx))
+            prepare.run(self.ssbo, self.count)  # derived per-leaf fields, one dispatch for all
             table = (np.zeros((1, JITTER_TABLE_SIZE), np.float32) if jitter_tables is None
                      else np.ascontiguousarray(np.atleast_2d(np.asarray(jitter_tables, np.float32))))
             self.jitter_tex = self._own(ctx.texture((table.shape[1], table.shape[0]), 1,

@@ -13,10 +13,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.leaf import JITTER_TABLE_SIZE
+from typing import Any, Iterable
+
+from numpy.typing import NDArray
+
+from ..model.leaf import JITTER_TABLE_SIZE, jitter_table
 from ..model.params import LeafParams
 
-__all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "pack_leaf", "generated_sources"]
+__all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "pack_leaf", "pack_leaves", "generated_sources"]
 
 _TYPES = {"vec4": ("<f4", (4,)), "ivec4": ("<i4", (4,)), "mat4": ("<f4", (4, 4))}
 
@@ -68,8 +72,11 @@ LEAF_BLOCK = Block(
         ("front", "vec4", 1),      # front rgb, translucency
         ("back", "vec4", 1),       # back rgb, unused
         ("model", "mat4", 1),      # leaf space -> world
+        # derived on the GPU by leaf_prepare.comp, packed so the vertex shader loads 6 vec4s:
+        ("axis", "vec4", 3),       # xyz A(v̄_i), w (x̄s_i · n(v̄_i)).x
+        ("heights", "vec4", 3),    # z̄f_i, z̄g_i, z̄s_i, (x̄s_i · n(v̄_i)).y   (n has no z, eq. 2)
     ),
-    "one leaf: Ω, jitter, material, world transform",
+    "one leaf: Ω, jitter, material, world transform; axis/heights written by leaf_prepare.comp",
 )
 
 FRAME_BLOCK = Block(
@@ -86,7 +93,8 @@ FRAME_BLOCK = Block(
     "camera, lights and output flags of one frame",
 )
 
-LEAF_BINDING, FRAME_BINDING = 0, 1
+LEAF_BINDING, FRAME_BINDING = 0, 1   # uniform blocks
+LEAVES_BINDING = 2                   # storage buffer of LeafData rows (instancing, prepare pass)
 
 
 def pack_leaf(params: LeafParams, out: np.ndarray | None = None) -> np.ndarray:
@@ -106,6 +114,26 @@ def pack_leaf(params: LeafParams, out: np.ndarray | None = None) -> np.ndarray:
     rec["back"] = (*m.back, 0.0)
     rec["model"] = params.transform.matrix().T  # column-major for GLSL
     return rec
+
+
+def pack_leaves(params: Iterable[LeafParams]) -> tuple[NDArray[Any], NDArray[np.float32]]:
+    """LEAF_BLOCK records (N,) for ``params`` and the jitter table rows they index: one row of
+    :data:`JITTER_TABLE_SIZE` values per distinct seed among leaves with jitter on (at least one
+    row). ``record["jitter"][3]`` is the row."""
+    params = list(params)
+    recs = np.zeros(len(params), dtype=LEAF_BLOCK.dtype)
+    rows: dict[int, int] = {}
+    tables: list[NDArray[np.float32]] = []
+    for i, p in enumerate(params):
+        pack_leaf(p, recs[i])
+        if p.jitter.enabled:
+            row = rows.get(p.jitter.seed)
+            if row is None:
+                row = rows[p.jitter.seed] = len(tables)
+                tables.append(jitter_table(p.jitter))
+            recs[i]["jitter"][3] = float(row)
+    table = np.stack(tables) if tables else np.zeros((1, JITTER_TABLE_SIZE), np.float32)
+    return recs, table.astype(np.float32)
 
 
 def generated_sources() -> dict[str, str]:

@@ -8,22 +8,25 @@ grids and framebuffers are bounded so long batch runs do not grow.
 from __future__ import annotations
 
 from collections import OrderedDict
-from typing import Any
+from typing import Any, Sequence
 
 import moderngl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..camera import VIEWS, Camera, frame_view
-from ..model.leaf import JITTER_TABLE_SIZE, evaluate, grid_indices, grid_uv, jitter_table
+from ..model.leaf import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table
 from ..model.params import LeafParams
 from .context import create_headless_context
-from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BINDING, LEAF_BLOCK, pack_leaf
+from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BINDING, LEAF_BLOCK, pack_leaf, pack_leaves
+from .prepare import LeafPrepare
 from .shaders import build_program
 
 __all__ = ["LeafRenderer", "DEFAULT_GRID", "Lighting"]
 
 DEFAULT_GRID = (33, 65)
+BATCH = 64            # leaves per atlas in render_many
+_MAX_ATLAS = 4096     # atlas side limit in pixels (well inside GL_MAX_RENDERBUFFER_SIZE)
 _MAX_CACHED = 3
 
 
@@ -83,6 +86,7 @@ class LeafRenderer:
                                      varyings=("v_object", "v_object_normal"))
         self.program["Leaf"].binding = LEAF_BINDING
         self.program["Frame"].binding = FRAME_BINDING
+        self.prepare = LeafPrepare(self.ctx)
         self.leaf_ubo = self.ctx.buffer(reserve=LEAF_BLOCK.nbytes)
         self.frame_ubo = self.ctx.buffer(reserve=FRAME_BLOCK.nbytes)
         self.jitter_tex = self.ctx.texture((JITTER_TABLE_SIZE, 1), 1, dtype="f4")
@@ -93,16 +97,27 @@ class LeafRenderer:
         self._grids = _LRU(_MAX_CACHED)
         self._targets = _LRU(_MAX_CACHED)
         self._capture_fbo: moderngl.Framebuffer | None = None
+        self._capture_out: moderngl.Buffer | None = None
+        self._batch_leaf: moderngl.Buffer | None = None
+        self._batch_frame: moderngl.Buffer | None = None
+        self._last_buffer: moderngl.Buffer | None = None
+        self._ubo_align = max(16, int(self.ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256)),
+                              int(self.ctx.info.get("GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT", 256)))
         self.uploads = 0  # bytes written to GPU buffers/textures by set_leaf (for edit-cost tests)
 
     # -- lifetime -------------------------------------------------------------------------------
     def release(self) -> None:
         self._grids.clear_all()
         self._targets.clear_all()
+        # bind the default framebuffer first: moderngl re-binds the current one on the next
+        # framebuffer creation, which fails once it has been deleted
+        self.ctx.detect_framebuffer(0).use()
         if self._capture_fbo is not None:
             _release([self._capture_fbo, *self._capture_fbo.color_attachments])
             self._capture_fbo = None
-        _release([self.program, self.leaf_ubo, self.frame_ubo, self.jitter_tex])
+        _release([self.program, self.prepare, self.leaf_ubo, self.frame_ubo, self.jitter_tex, self._capture_out,
+                  self._batch_leaf, self._batch_frame])
+        self._capture_out = self._batch_leaf = self._batch_frame = self._last_buffer = None
         if self._owns_ctx:
             self.ctx.release()
 
@@ -118,13 +133,14 @@ class LeafRenderer:
 
     # -- state ----------------------------------------------------------------------------------
     def set_leaf(self, params: LeafParams) -> None:
-        """Upload the leaf's uniform block (288 bytes) and, if its seed changed, its jitter row.
+        """Upload the leaf's uniform block (224 bytes) and, if its seed changed, its jitter row.
 
         Changing jitter amplitude or density only changes the block: nothing is rebuilt.
         """
         pack_leaf(params, self._leaf)
         self.leaf_ubo.write(self._leaf.tobytes())
         self.uploads += LEAF_BLOCK.nbytes
+        self.prepare.run(self.leaf_ubo, 1)
         if params.jitter.enabled and self._jitter_seed != params.jitter.seed:
             table = jitter_table(params.jitter)
             self.jitter_tex.write(table.tobytes())
@@ -133,7 +149,12 @@ class LeafRenderer:
 
     def set_camera(self, camera: Camera, *, srgb: bool, flat: bool = False,
                    lighting: type[Lighting] = Lighting) -> None:
-        f = self._frame
+        self._fill_frame(self._frame, camera, srgb=srgb, flat=flat, lighting=lighting)
+        self.frame_ubo.write(self._frame.tobytes())
+
+    @staticmethod
+    def _fill_frame(f: np.ndarray, camera: Camera, *, srgb: bool, flat: bool = False,
+                    lighting: type[Lighting] = Lighting) -> None:
         f["view"] = camera.view.T
         f["proj"] = camera.proj.T
         f["eye"] = camera.eye
@@ -141,7 +162,6 @@ class LeafRenderer:
         f["fill"] = lighting.fill
         f["ambient"][:3] = lighting.ambient
         f["flags"] = (int(srgb), int(flat), 0, 0)
-        self.frame_ubo.write(f.tobytes())
 
     def _bind(self) -> None:
         self.leaf_ubo.bind_to_uniform_block(LEAF_BINDING)
@@ -150,14 +170,19 @@ class LeafRenderer:
 
     def grid(self, nu: int, nv: int) -> moderngl.VertexArray:
         """The (cached) vertex array of the (nu × nv) grid: (u, v) attributes and triangles."""
-        def make() -> tuple[moderngl.VertexArray, moderngl.Buffer, moderngl.Buffer]:
+        return self._grid_entry(nu, nv)[0]
+
+    def _grid_entry(self, nu: int, nv: int) -> tuple[moderngl.VertexArray, ...]:
+        """(indexed vao for drawing, non-indexed vao for capture, vbo, ibo) of a grid, cached."""
+        def make() -> tuple[Any, ...]:
             vbo = self.ctx.buffer(grid_uv(nu, nv).tobytes())
             ibo = self.ctx.buffer(grid_indices(nu, nv).tobytes())
             vao = self.ctx.vertex_array(self.program, [(vbo, "2f", "in_uv")], index_buffer=ibo,
                                         index_element_size=4)
-            return vao, vbo, ibo
+            points = self.ctx.vertex_array(self.program, [(vbo, "2f", "in_uv")])
+            return vao, points, vbo, ibo
 
-        return self._grids.get_or_make((nu, nv), make)[0]
+        return self._grids.get_or_make((nu, nv), make)
 
     def _target(self, w: int, h: int, samples: int, linear: bool) -> tuple[moderngl.Framebuffer, ...]:
         def make() -> tuple[Any, ...]:
@@ -175,13 +200,27 @@ class LeafRenderer:
         return self._targets.get_or_make((w, h, samples, linear), make)
 
     # -- drawing --------------------------------------------------------------------------------
-    def render(self, params: LeafParams, size: tuple[int, int] = (256, 256), view: str = "top",
+    def render(self, params: LeafParams, size: Any = (256, 256), view: str = "top",
                background: ArrayLike | None = None, *, grid: tuple[int, int] = DEFAULT_GRID,
                samples: int | None = None, linear: bool = False) -> NDArray[Any]:
         """Render ``params`` offscreen; (h, w, 4) uint8 sRGB, or float32 linear if ``linear``.
 
         ``background=None`` leaves alpha 0 around the leaf; leaf pixels have alpha 255 (1.0),
-        partial at multisampled edges. ``samples`` defaults to 0 for ``top`` and 4 otherwise.
+        partial at multisampled edges (straight alpha in uint8, premultiplied in float).
+        ``samples`` defaults to 0 for ``top`` and 4 otherwise. A batch of one of
+        :meth:`render_many`.
+        """
+        return self.render_many([params], size, view, background, grid=grid, samples=samples,
+                                linear=linear)[0]
+
+    def render_many(self, leaves: Sequence[LeafParams], size: Any = (256, 256), view: str = "top",
+                    background: ArrayLike | None = None, *, grid: tuple[int, int] = DEFAULT_GRID,
+                    samples: int | None = None, linear: bool = False) -> list[NDArray[Any]]:
+        """Render several leaves, each framed on its own, in few GPU round trips.
+
+        The vertices of every leaf are first captured from the vertex shader in one pass (so the
+        framing uses exactly the drawn vertices), then all leaves are drawn into tiles of one
+        atlas, resolved and read back once per chunk of up to :data:`BATCH` leaves.
         """
         w, h = _check_size(size)
         if view not in VIEWS:
@@ -190,30 +229,120 @@ class LeafRenderer:
         if samples is None:
             samples = 0 if view == "top" else 4
         samples = min(samples, self.ctx.max_samples)
-
-        uv = grid_uv(nu, nv)
-        pts = evaluate(params, uv[:, 0], uv[:, 1])
-        m = params.transform.matrix()
-        world = pts @ m[:3, :3].T + m[:3, 3]
-        self.set_leaf(params)
-        self.set_camera(frame_view(view, world, (w, h)), srgb=not linear)
-        target = self._target(w, h, samples, linear)
-        draw_fbo, read_fbo = target[0], target[1]
-
         bg = _background(background)
+        cols = max(1, min(BATCH, _MAX_ATLAS // w))
+        rows = max(1, _MAX_ATLAS // h)
+        chunk = max(1, min(BATCH, cols * rows))
+        images: list[NDArray[Any]] = []
+        for start in range(0, len(leaves), chunk):
+            images += self._render_chunk(leaves[start:start + chunk], w, h, view, bg, (nu, nv), samples,
+                                         linear, cols)
+        return images
+
+    def _render_chunk(self, leaves: Sequence[LeafParams], w: int, h: int, view: str, bg: tuple[float, ...],
+                      grid: tuple[int, int], samples: int, linear: bool, max_cols: int) -> list[NDArray[Any]]:
+        n = len(leaves)
+        records, tables = pack_leaves(leaves)
+        self._upload_jitter(tables)
+        leaf_stride = self._write_records(self._batch_leaf, records)
+        self._batch_leaf = self._last_buffer
+        for i in range(n):  # rows sit at the uniform-offset alignment: one small dispatch each
+            self.prepare.run(self._batch_leaf, 1, offset=i * leaf_stride)
+
+        # 1. capture every leaf's grid from the vertex shader, frame each camera on it
+        nverts = grid[0] * grid[1]
+        positions = self._capture_rows(leaf_stride, n, grid)
+        frames = np.zeros(n, dtype=FRAME_BLOCK.dtype)
+        for i, leaf in enumerate(leaves):
+            m = leaf.transform.matrix()
+            world = positions[i * nverts:(i + 1) * nverts].astype(np.float64) @ m[:3, :3].T + m[:3, 3]
+            self._fill_frame(frames[i], frame_view(view, world, (w, h)), srgb=not linear)
+        frame_stride = self._write_records(self._batch_frame, frames)
+        self._batch_frame = self._last_buffer
+
+        # 2. draw each leaf into its tile
+        cols = min(n, max_cols)
+        tiles_y = (n + cols - 1) // cols
+        target = self._target(cols * w, tiles_y * h, samples, linear)
+        draw_fbo, read_fbo = target[0], target[1]
         draw_fbo.use()
+        self.ctx.scissor = None
         draw_fbo.clear(*bg, depth=1.0)
         self.ctx.enable_only(moderngl.DEPTH_TEST)
-        self._bind()
-        self.grid(nu, nv).render(moderngl.TRIANGLES)
+        self.jitter_tex.use(location=0)
+        vao = self.grid(*grid)
+        for i in range(n):
+            x, y = (i % cols) * w, (i // cols) * h
+            self.ctx.viewport = self.ctx.scissor = (x, y, w, h)
+            self._batch_leaf.bind_to_uniform_block(LEAF_BINDING, offset=i * leaf_stride, size=LEAF_BLOCK.nbytes)
+            self._batch_frame.bind_to_uniform_block(FRAME_BINDING, offset=i * frame_stride, size=FRAME_BLOCK.nbytes)
+            vao.render(moderngl.TRIANGLES)
+        self.ctx.scissor = None
         if draw_fbo is not read_fbo:
             self.ctx.copy_framebuffer(read_fbo, draw_fbo)
-        dtype = "f4" if linear else "f1"
-        raw = read_fbo.read(components=4, dtype=dtype)
-        img = np.frombuffer(raw, dtype=np.float32 if linear else np.uint8).reshape(h, w, 4)[::-1]
-        if samples and not linear and bg[3] == 0.0:
-            img = _unpremultiply(img)
-        return np.ascontiguousarray(img)
+
+        # 3. one readback, split into tiles (GL rows run bottom-up)
+        dtype = np.float32 if linear else np.uint8
+        raw = read_fbo.read(components=4, dtype="f4" if linear else "f1")
+        atlas = np.frombuffer(raw, dtype=dtype).reshape(tiles_y * h, cols * w, 4)
+        images = []
+        for i in range(n):
+            x, y = (i % cols) * w, (i // cols) * h
+            img = atlas[y:y + h, x:x + w][::-1]
+            if samples and not linear and bg[3] == 0.0:
+                img = _unpremultiply(img)
+            images.append(np.ascontiguousarray(img))
+        return images
+
+    def _capture_rows(self, leaf_stride: int, n: int, grid: tuple[int, int]) -> NDArray[np.float32]:
+        """Leaf-space positions of the grid of each of ``n`` leaves stored in the batch buffer."""
+        nverts = grid[0] * grid[1]
+        need = n * nverts * 24
+        if self._capture_out is None or self._capture_out.size < need:
+            _release(self._capture_out)
+            self._capture_out = self.ctx.buffer(reserve=_grow(need))
+        vao = self._grid_entry(*grid)[1]
+        self._capture_target().use()
+        self.jitter_tex.use(location=0)
+        self.frame_ubo.bind_to_uniform_block(FRAME_BINDING)
+        for i in range(n):
+            self._batch_leaf.bind_to_uniform_block(LEAF_BINDING, offset=i * leaf_stride, size=LEAF_BLOCK.nbytes)
+            vao.transform(self._capture_out, mode=moderngl.POINTS, vertices=nverts, buffer_offset=i * nverts * 24)
+        data = np.frombuffer(self._capture_out.read(size=need), dtype=np.float32).reshape(n * nverts, 6)
+        return data[:, :3]
+
+    def _capture_target(self) -> moderngl.Framebuffer:
+        # a surfaceless EGL context has no default framebuffer; draws (even with rasterizer
+        # discard) need a complete one bound, else GL_INVALID_FRAMEBUFFER_OPERATION
+        if self._capture_fbo is None:
+            self._capture_fbo = self.ctx.framebuffer([self.ctx.renderbuffer((1, 1), 4)])
+        return self._capture_fbo
+
+    def _write_records(self, buf: moderngl.Buffer | None, records: np.ndarray) -> int:
+        """Write ``records`` at the uniform-buffer offset alignment into ``buf`` (grown if needed);
+        the buffer used is left in ``self._last_buffer``; returns the stride in bytes."""
+        size = records.dtype.itemsize
+        stride = -(-size // self._ubo_align) * self._ubo_align
+        data = np.zeros((len(records), stride), np.uint8)
+        data[:, :size] = records.view(np.uint8).reshape(len(records), size)
+        if buf is None or buf.size < data.nbytes:
+            _release(buf)
+            buf = self.ctx.buffer(reserve=_grow(data.nbytes))
+        buf.write(data.tobytes())
+        self._last_buffer = buf
+        return stride
+
+    def _upload_jitter(self, tables: NDArray[np.float32]) -> None:
+        """Make the jitter texture hold ``tables`` (one row per seed used in the batch)."""
+        rows = tables.shape[0]
+        if rows == 1 and not tables.any():
+            return  # no leaf in the batch has jitter on: nothing reads the texture
+        if self.jitter_tex.height < rows:
+            _release(self.jitter_tex)
+            self.jitter_tex = self.ctx.texture((JITTER_TABLE_SIZE, _grow(rows)), 1, dtype="f4")
+            self.jitter_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.jitter_tex.write(np.ascontiguousarray(tables).tobytes(), viewport=(0, 0, JITTER_TABLE_SIZE, rows))
+        self._jitter_seed = None  # row 0 no longer holds the single-leaf seed
 
     def capture(self, params: LeafParams, u: ArrayLike, v: ArrayLike) -> tuple[NDArray[np.float32], ...]:
         """Positions and normals (leaf space) computed by the rendering vertex shader at (u, v),
@@ -225,11 +354,7 @@ class LeafRenderer:
             return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)
         self.set_leaf(params)
         self._bind()
-        # a surfaceless EGL context has no default framebuffer; draws (even with rasterizer
-        # discard) need a complete one bound, else GL_INVALID_FRAMEBUFFER_OPERATION
-        if self._capture_fbo is None:
-            self._capture_fbo = self.ctx.framebuffer([self.ctx.renderbuffer((1, 1), 4)])
-        self._capture_fbo.use()
+        self._capture_target().use()
         vbo = self.ctx.buffer(uv.tobytes())
         out = self.ctx.buffer(reserve=n * 24)
         vao = self.ctx.vertex_array(self.program, [(vbo, "2f", "in_uv")])
@@ -239,6 +364,11 @@ class LeafRenderer:
         finally:
             _release([vao, vbo, out])
         return data[:, :3].copy(), data[:, 3:].copy()
+
+
+def _grow(n: int) -> int:
+    """Capacity for ``n``: the next power of two, so repeated batches reuse buffers."""
+    return 1 << max(0, int(n - 1).bit_length())
 
 
 def _unpremultiply(img: NDArray[np.uint8]) -> NDArray[np.uint8]:

@@ -7,6 +7,7 @@ the two through the leaf evaluator.
 
 from __future__ import annotations
 
+from functools import lru_cache
 from math import comb
 
 import numpy as np
@@ -30,9 +31,14 @@ def bernstein_matrix(n: int) -> NDArray[np.float64]:
 def bernstein(n: int, t: ArrayLike) -> NDArray[np.float64]:
     """Bernstein basis values ``B_{i,n}(t)``, shape ``t.shape + (n+1,)``."""
     t = np.asarray(t, dtype=np.float64)[..., None]
-    i = np.arange(n + 1)
-    coeff = np.array([comb(n, k) for k in i], dtype=np.float64)
+    i, coeff = _basis_consts(n)
     return coeff * t**i * (1.0 - t) ** (n - i)
+
+
+@lru_cache(maxsize=16)
+def _basis_consts(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    i = np.arange(n + 1, dtype=np.float64)
+    return i, np.array([comb(n, k) for k in range(n + 1)], dtype=np.float64)
 
 
 def evaluate_curve(points: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:

@@ -31,6 +31,7 @@ from .params import Jitter, LeafParams
 
 __all__ = [
     "JITTER_TABLE_SIZE",
+    "axis_frames",
     "jitter_table",
     "Partials",
     "partials",
@@ -54,6 +55,14 @@ def jitter_table(jitter: Jitter, size: int = JITTER_TABLE_SIZE) -> NDArray[np.fl
     return rng.random(size).astype(np.float32)
 
 
+def _basis(n: int, t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Bernstein basis at ``t``, computed once per distinct value (grids repeat each u and v)."""
+    values, inverse = np.unique(t, return_inverse=True)
+    if values.size * 4 > t.size:
+        return bernstein(n, t)
+    return bernstein(n, values)[inverse.ravel()]
+
+
 def _curve(points: NDArray[np.float64], t: NDArray[np.float64]) -> NDArray[np.float64]:
     return bernstein(points.shape[-2] - 1, t) @ points
 
@@ -64,20 +73,35 @@ def _axis_normal(d: NDArray[np.float64]) -> NDArray[np.float64]:
     return m / np.linalg.norm(m, axis=-1, keepdims=True)
 
 
-def _side_controls(params: LeafParams, sigma: float) -> tuple[NDArray[np.float64], ...]:
-    """Control points (5, 3) of S, F and G for side ``sigma`` (eqs 3, 4a, 4b)."""
+def axis_frames(params: LeafParams) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The per-leaf constants of eqs 3-4: ``A(v̄_i)`` and ``x̄s_i · n(v̄_i)``, each (3, 3).
+
+    The GPU computes the same two arrays once per leaf (``shaders/leaf_prepare.comp``).
+    """
     sh = params.shape
     pa = sh.axis_points()
-    vbar, xs = sh.vbar, sh.xs
-    a = _curve(pa, vbar)
-    n = _axis_normal(_curve(derivative_points(pa), vbar))
+    a = _curve(pa, sh.vbar)
+    n = _axis_normal(_curve(derivative_points(pa), sh.vbar))
+    return a, sh.xs[:, None] * n
+
+
+def _side_controls(params: LeafParams) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Control points of S, F and G (eqs 3, 4a, 4b) for both sides.
+
+    Returns ``(plus, minus)``, each (5, 9): columns 0-2 are S, 3-5 F, 6-8 G, rows the five control
+    points base, three inner, apex.
+    """
+    sh = params.shape
+    a, q = axis_frames(params)
     z = np.array([0.0, 0.0, 1.0])
     out = []
-    for frac, zz in ((1.0, sh.zs), (1 / 3, np.asarray(sh.zf)), (2 / 3, np.asarray(sh.zg))):
-        mid = a + (sigma * frac * xs)[:, None] * n + np.asarray(zz)[:, None] * z
-        out.append(np.vstack([_BASE, mid, _APEX]))
-    s, f, g = out
-    return s, f, g
+    for sigma in (1.0, -1.0):
+        cols = []
+        for frac, zz in ((1.0, sh.zs), (1 / 3, np.asarray(sh.zf)), (2 / 3, np.asarray(sh.zg))):
+            mid = a + (sigma * frac) * q + np.asarray(zz)[:, None] * z
+            cols.append(np.vstack([_BASE, mid, _APEX]))
+        out.append(np.hstack(cols))
+    return out[0], out[1]
 
 
 @dataclass(frozen=True)
@@ -108,21 +132,23 @@ def partials(params: LeafParams, u: ArrayLike, v: ArrayLike) -> Partials:
     pa = params.shape.axis_points()
     pa_d = derivative_points(pa)
 
-    # longitudinal curves c_k(v) and their v-derivatives, per side
+    # longitudinal curves c_k(v) = (A, F_σ, G_σ, S_σ) and their v-derivatives (eq. 5)
+    b4, db4, b3 = _basis(4, vv), _basis(3, vv), _basis(3, vv)
     c = np.empty((4,) + vv.shape + (3,))
     dc = np.empty_like(c)
-    c[0], dc[0] = _curve(pa, vv), _curve(pa_d, vv)
-    for side in (1.0, -1.0):
-        mask = sigma == side
+    c[0], dc[0] = b3 @ pa, _basis(2, vv) @ pa_d
+    plus, minus = _side_controls(params)
+    right = sigma > 0
+    for mask, ctrl in ((right, plus), (~right, minus)):
         if not mask.any():
             continue
-        sc, fc, gc = _side_controls(params, side)
-        for k, pts in ((1, fc), (2, gc), (3, sc)):
-            c[k][mask] = _curve(pts, vv[mask])
-            dc[k][mask] = _curve(derivative_points(pts), vv[mask])
+        pos = (b4[mask] @ ctrl).reshape(-1, 3, 3)  # (n, curve S/F/G, xyz)
+        der = (db4[mask] @ (4.0 * (ctrl[1:] - ctrl[:-1]))).reshape(-1, 3, 3)
+        c[3][mask], c[1][mask], c[2][mask] = pos[:, 0], pos[:, 1], pos[:, 2]
+        dc[3][mask], dc[1][mask], dc[2][mask] = der[:, 0], der[:, 1], der[:, 2]
 
-    b = bernstein(3, s)  # (N, 4)
-    db = bernstein(2, s) @ np.array([[-3, 3, 0, 0], [0, -3, 3, 0], [0, 0, -3, 3]], dtype=np.float64)
+    b = _basis(3, s)  # (N, 4)
+    db = _basis(2, s) @ np.array([[-3, 3, 0, 0], [0, -3, 3, 0], [0, 0, -3, 3]], dtype=np.float64)
     L = np.einsum("nk,knd->nd", b, c)
     Lu = sigma[:, None] * np.einsum("nk,knd->nd", db, c)
     Lv = np.einsum("nk,knd->nd", b, dc)

@@ -1,0 +1,36 @@
+"""The per-leaf prepare pass: ``shaders/leaf_prepare.comp`` fills the derived fields
+(``axis_p``, ``axis_q``) of LeafData rows from Ω, once per leaf, so the vertex shader does not
+recompute them for every vertex. Run it after writing rows and before drawing them.
+"""
+
+from __future__ import annotations
+
+import moderngl
+
+from .layout import LEAF_BLOCK, LEAVES_BINDING
+from .shaders import build_compute
+
+__all__ = ["LeafPrepare"]
+
+_LOCAL_SIZE = 64
+
+
+class LeafPrepare:
+    """Owns the compute program; :meth:`run` prepares ``count`` tightly packed rows of ``buffer``
+    starting at byte ``offset`` (a uniform buffer holding one row works too)."""
+
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self.ctx = ctx
+        self.shader = build_compute(ctx, "leaf_prepare.comp")
+
+    def run(self, buffer: moderngl.Buffer, count: int, offset: int = 0) -> None:
+        if count <= 0:
+            return
+        buffer.bind_to_storage_buffer(LEAVES_BINDING, offset=offset, size=count * LEAF_BLOCK.nbytes)
+        self.shader["count"] = count
+        self.shader.run(group_x=-(-count // _LOCAL_SIZE))
+        # the rows are read next as uniform blocks, storage buffers or transform-feedback input
+        self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
+
+    def release(self) -> None:
+        self.shader.release()
