@@ -133,7 +133,8 @@ class LeafRenderer:
 
     # -- state ----------------------------------------------------------------------------------
     def set_leaf(self, params: LeafParams) -> None:
-        """Upload the leaf's uniform block (224 bytes) and, if its seed changed, its jitter row.
+        """Upload the leaf's uniform block (320 bytes), refresh its derived constants (one compute
+        dispatch) and, if its seed changed, its jitter row.
 
         Changing jitter amplitude or density only changes the block: nothing is rebuilt.
         """
