@@ -150,3 +150,13 @@ def test_generated_glsl_declares_every_member():
     text = LEAF_BLOCK.glsl(0)
     for name, glsl, count in LEAF_BLOCK.members:
         assert f"{glsl} {name}{'' if count == 1 else f'[{count}]'};" in text
+
+
+def test_single_leaf_jitter_after_a_multi_seed_batch(gl, presets):
+    """A batch with several seeds grows the jitter texture; single-leaf edits still upload and
+    read their own row afterwards."""
+    seeds = [presets["ovate"].replace(jitter=Jitter(enabled=True, seed=s)) for s in range(5)]
+    gl.render_many(seeds, (24, 24))
+    one = presets["ovate"].replace(jitter=Jitter(enabled=True, seed=77, amplitude=0.05))
+    u, v = np.ones(64), np.linspace(0.05, 0.95, 64)
+    np.testing.assert_allclose(leafview.gpu.evaluate(one, u, v), leafview.evaluate(one, u, v), atol=TOL)

@@ -29,7 +29,7 @@ from ..model.leaf import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table,
 from ..model.params import Jitter, LeafParams, Material, Shape, Transform
 from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, LEAVES_BINDING, pack_leaf, pack_leaves
 from .prepare import LeafPrepare
-from .renderer import Lighting
+from .renderer import Lighting, fill_frame
 from .shaders import build_program
 
 __all__ = ["LEAVES_BINDING", "InstancedLeaves", "BakedLeaves", "pack_leaves", "bake_leaves",
@@ -162,6 +162,8 @@ class _Batch:
 
     program: moderngl.Program
     vao: moderngl.VertexArray
+    nu: int
+    nv: int
 
     def __init__(self, ctx: moderngl.Context) -> None:
         self.ctx = ctx
@@ -186,15 +188,12 @@ class _Batch:
 
     def set_camera(self, camera: Camera, *, srgb: bool = True, flat: bool = False,
                    lighting: type[Lighting] = Lighting) -> None:
-        f = self._frame
-        f["view"] = camera.view.T
-        f["proj"] = camera.proj.T
-        f["eye"] = camera.eye
-        f["key"] = lighting.key
-        f["fill"] = lighting.fill
-        f["ambient"][:3] = lighting.ambient
-        f["flags"] = (int(srgb), int(flat), 0, 0)
-        self.frame_ubo.write(f.tobytes())
+        fill_frame(self._frame, camera, srgb=srgb, flat=flat, lighting=lighting)
+        self.frame_ubo.write(self._frame.tobytes())
+
+    @property
+    def triangles_per_leaf(self) -> int:
+        return 2 * (self.nu - 1) * (self.nv - 1)
 
     def _bind(self) -> None:
         self.frame_ubo.bind_to_uniform_block(FRAME_BINDING)
@@ -251,10 +250,6 @@ class InstancedLeaves(_Batch):
         except BaseException:
             self.release()
             raise
-
-    @property
-    def triangles_per_leaf(self) -> int:
-        return 2 * (self.nu - 1) * (self.nv - 1)
 
     def _bind(self) -> None:
         super()._bind()
@@ -348,10 +343,6 @@ class BakedLeaves(_Batch):
         pos, nrm = leaves.capture()
         recs = leaves.records
         return cls(leaves.ctx, pos, nrm, (leaves.nu, leaves.nv), recs["front"], recs["back"][:, :3])
-
-    @property
-    def triangles_per_leaf(self) -> int:
-        return 2 * (self.nu - 1) * (self.nv - 1)
 
     def draw(self) -> None:
         """All leaves, one indexed draw, into the bound framebuffer (depth test on)."""

@@ -70,7 +70,9 @@ def _release(obj: Any) -> None:
 
 
 class LeafRenderer:
-    """Draws one leaf at a time from its uniform block.
+    """Draws leaves from their parameters: one at a time from the Leaf uniform block
+    (:meth:`set_leaf`, :meth:`render`, :meth:`capture`) or many into one atlas
+    (:meth:`render_many`).
 
     Parameters
     ----------
@@ -100,24 +102,24 @@ class LeafRenderer:
         self._capture_out: moderngl.Buffer | None = None
         self._batch_leaf: moderngl.Buffer | None = None
         self._batch_frame: moderngl.Buffer | None = None
-        self._last_buffer: moderngl.Buffer | None = None
-        self._ubo_align = max(16, int(self.ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256)),
+        # batch rows are bound as uniform-block and storage-buffer ranges: honour both alignments
+        self._row_align = max(16, int(self.ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256)),
                               int(self.ctx.info.get("GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT", 256)))
         self.uploads = 0  # bytes written to GPU buffers/textures by set_leaf (for edit-cost tests)
 
     # -- lifetime -------------------------------------------------------------------------------
     def release(self) -> None:
-        self._grids.clear_all()
-        self._targets.clear_all()
         # bind the default framebuffer first: moderngl re-binds the current one on the next
         # framebuffer creation, which fails once it has been deleted
         self.ctx.detect_framebuffer(0).use()
+        self._grids.clear_all()
+        self._targets.clear_all()
         if self._capture_fbo is not None:
             _release([self._capture_fbo, *self._capture_fbo.color_attachments])
             self._capture_fbo = None
         _release([self.program, self.prepare, self.leaf_ubo, self.frame_ubo, self.jitter_tex, self._capture_out,
                   self._batch_leaf, self._batch_frame])
-        self._capture_out = self._batch_leaf = self._batch_frame = self._last_buffer = None
+        self._capture_out = self._batch_leaf = self._batch_frame = None
         if self._owns_ctx:
             self.ctx.release()
 
@@ -144,7 +146,7 @@ class LeafRenderer:
         self.prepare.run(self.leaf_ubo, 1)
         if params.jitter.enabled and self._jitter_seed != params.jitter.seed:
             table = jitter_table(params.jitter)
-            self.jitter_tex.write(table.tobytes())
+            self.jitter_tex.write(table.tobytes(), viewport=(0, 0, JITTER_TABLE_SIZE, 1))
             self.uploads += table.nbytes
             self._jitter_seed = params.jitter.seed
 
@@ -245,8 +247,7 @@ class LeafRenderer:
         n = len(leaves)
         records, tables = pack_leaves(leaves)
         self._upload_jitter(tables)
-        leaf_stride = self._write_records(self._batch_leaf, records)
-        self._batch_leaf = self._last_buffer
+        self._batch_leaf, leaf_stride = self._write_records(self._batch_leaf, records)
         for i in range(n):  # rows sit at the uniform-offset alignment: one small dispatch each
             self.prepare.run(self._batch_leaf, 1, offset=i * leaf_stride)
 
@@ -258,8 +259,7 @@ class LeafRenderer:
             m = leaf.transform.matrix()
             world = positions[i * nverts:(i + 1) * nverts].astype(np.float64) @ m[:3, :3].T + m[:3, 3]
             self._fill_frame(frames[i], frame_view(view, world, (w, h)), srgb=not linear)
-        frame_stride = self._write_records(self._batch_frame, frames)
-        self._batch_frame = self._last_buffer
+        self._batch_frame, frame_stride = self._write_records(self._batch_frame, frames)
 
         # 2. draw each leaf into its tile
         cols = min(n, max_cols)
@@ -319,19 +319,18 @@ class LeafRenderer:
             self._capture_fbo = self.ctx.framebuffer([self.ctx.renderbuffer((1, 1), 4)])
         return self._capture_fbo
 
-    def _write_records(self, buf: moderngl.Buffer | None, records: np.ndarray) -> int:
-        """Write ``records`` at the uniform-buffer offset alignment into ``buf`` (grown if needed);
-        the buffer used is left in ``self._last_buffer``; returns the stride in bytes."""
+    def _write_records(self, buf: moderngl.Buffer | None, records: np.ndarray) -> tuple[moderngl.Buffer, int]:
+        """Write ``records`` one per aligned row into ``buf``, replaced by a larger buffer when
+        too small; returns the buffer in use and the row stride in bytes."""
         size = records.dtype.itemsize
-        stride = -(-size // self._ubo_align) * self._ubo_align
+        stride = -(-size // self._row_align) * self._row_align
         data = np.zeros((len(records), stride), np.uint8)
         data[:, :size] = records.view(np.uint8).reshape(len(records), size)
         if buf is None or buf.size < data.nbytes:
             _release(buf)
             buf = self.ctx.buffer(reserve=_grow(data.nbytes))
         buf.write(data.tobytes())
-        self._last_buffer = buf
-        return stride
+        return buf, stride
 
     def _upload_jitter(self, tables: NDArray[np.float32]) -> None:
         """Make the jitter texture hold ``tables`` (one row per seed used in the batch)."""
