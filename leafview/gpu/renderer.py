@@ -22,7 +22,7 @@ from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BINDING, LEAF_BLOCK, pack_l
 from .prepare import LeafPrepare
 from .shaders import build_program
 
-__all__ = ["LeafRenderer", "DEFAULT_GRID", "Lighting"]
+__all__ = ["LeafRenderer", "DEFAULT_GRID", "BATCH", "Lighting", "fill_frame"]
 
 DEFAULT_GRID = (33, 65)
 BATCH = 64            # leaves per atlas in render_many
@@ -36,6 +36,18 @@ class Lighting:
     key = (0.35, -0.45, 0.82, 1.05)
     fill = (-0.65, 0.45, 0.45, 0.35)
     ambient = (0.16, 0.17, 0.18)
+
+
+def fill_frame(record: np.ndarray, camera: Camera, *, srgb: bool, flat: bool = False,
+               lighting: type[Lighting] = Lighting) -> None:
+    """Fill a FRAME_BLOCK record: camera matrices (column-major), lights and output flags."""
+    record["view"] = camera.view.T
+    record["proj"] = camera.proj.T
+    record["eye"] = camera.eye
+    record["key"] = lighting.key
+    record["fill"] = lighting.fill
+    record["ambient"][:3] = lighting.ambient
+    record["flags"] = (int(srgb), int(flat), 0, 0)
 
 
 class _LRU(OrderedDict):
@@ -152,19 +164,8 @@ class LeafRenderer:
 
     def set_camera(self, camera: Camera, *, srgb: bool, flat: bool = False,
                    lighting: type[Lighting] = Lighting) -> None:
-        self._fill_frame(self._frame, camera, srgb=srgb, flat=flat, lighting=lighting)
+        fill_frame(self._frame, camera, srgb=srgb, flat=flat, lighting=lighting)
         self.frame_ubo.write(self._frame.tobytes())
-
-    @staticmethod
-    def _fill_frame(f: np.ndarray, camera: Camera, *, srgb: bool, flat: bool = False,
-                    lighting: type[Lighting] = Lighting) -> None:
-        f["view"] = camera.view.T
-        f["proj"] = camera.proj.T
-        f["eye"] = camera.eye
-        f["key"] = lighting.key
-        f["fill"] = lighting.fill
-        f["ambient"][:3] = lighting.ambient
-        f["flags"] = (int(srgb), int(flat), 0, 0)
 
     def _bind(self) -> None:
         self.leaf_ubo.bind_to_uniform_block(LEAF_BINDING)
@@ -258,7 +259,7 @@ class LeafRenderer:
         for i, leaf in enumerate(leaves):
             m = leaf.transform.matrix()
             world = positions[i * nverts:(i + 1) * nverts].astype(np.float64) @ m[:3, :3].T + m[:3, 3]
-            self._fill_frame(frames[i], frame_view(view, world, (w, h)), srgb=not linear)
+            fill_frame(frames[i], frame_view(view, world, (w, h)), srgb=not linear)
         self._batch_frame, frame_stride = self._write_records(self._batch_frame, frames)
 
         # 2. draw each leaf into its tile
