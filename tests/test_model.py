@@ -161,3 +161,25 @@ def test_model_never_imports_gl():
             "print(bad); sys.exit(1 if bad else 0)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_control_polygons_are_the_curves_control_points():
+    from leafview.model.leaf import control_polygons
+
+    rng = np.random.default_rng(8)
+    p = random_params(rng)
+    polys = control_polygons(p)
+    assert set(polys) == {"A", "S+", "F+", "G+", "S-", "F-", "G-"}
+    v = np.linspace(0, 1, 11)
+    np.testing.assert_allclose(evaluate_curve(polys["A"], v), evaluate(p, 0.0, v), atol=1e-12)
+    np.testing.assert_allclose(evaluate_curve(polys["S+"], v), evaluate(p, 1.0, v), atol=1e-12)
+    np.testing.assert_allclose(evaluate_curve(polys["S-"], v), evaluate(p, -1.0, v), atol=1e-12)
+    np.testing.assert_allclose(polys["F+"][1:4], _frac_points(p, 1 / 3, p.shape.zf), atol=1e-12)  # eq. 4a
+    np.testing.assert_allclose(polys["G-"][1:4], _frac_points(p, -2 / 3, p.shape.zg), atol=1e-12)  # eq. 4b
+
+
+def _frac_points(p, frac, z):
+    from leafview.model.leaf import axis_frames
+
+    a, q = axis_frames(p)
+    return a + frac * q + np.c_[np.zeros(3), np.zeros(3), z]

@@ -148,3 +148,28 @@ def test_render_many_equals_one_at_a_time(gl, presets):
 def _same(a, b, what):
     diff = np.abs(a.astype(np.int16) - b.astype(np.int16)).max(axis=-1)
     assert diff.max() <= 2 and np.mean(diff > 0) <= 0.005, f"{what}: {np.mean(diff > 0):.2%} differ, max {diff.max()}"
+
+
+def test_interactive_draw_into_a_bound_framebuffer(gl, presets):
+    """set_leaf + set_camera + draw(): the viewer's per-frame path, with wireframe."""
+    from leafview.camera import frame_view
+
+    fbo = gl.ctx.simple_framebuffer((64, 64))
+    try:
+        p = presets["ovate"]
+        gl.set_leaf(p)
+        uv = grid_uv(33, 65)
+        gl.set_camera(frame_view("top", leafview.evaluate(p, uv[:, 0], uv[:, 1]), (64, 64)), srgb=True)
+        covered = {}
+        for wire in (False, True):
+            fbo.use()
+            fbo.clear(0, 0, 0, 0, depth=1.0)
+            gl.draw(wireframe=wire)
+            img = np.frombuffer(fbo.read(components=4), np.uint8).reshape(64, 64, 4)
+            covered[wire] = np.count_nonzero(img[..., 3])
+        assert covered[False] > 1000  # the filled leaf
+        assert 0 < covered[True] < covered[False]  # the wireframe draws only its edges
+        assert gl.ctx.wireframe is False
+    finally:
+        gl.ctx.detect_framebuffer(0).use()
+        fbo.release()

@@ -204,6 +204,18 @@ class LeafRenderer:
         return self._targets.get_or_make((w, h, samples, linear), make)
 
     # -- drawing --------------------------------------------------------------------------------
+    def draw(self, grid: tuple[int, int] = DEFAULT_GRID, *, wireframe: bool = False) -> None:
+        """Draw the leaf last given to :meth:`set_leaf` with the camera last given to
+        :meth:`set_camera` into the currently bound framebuffer (interactive use: the viewer
+        uploads only what an edit changed, then calls this every frame)."""
+        self._bind()
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        self.ctx.wireframe = wireframe
+        try:
+            self.grid(*grid).render(moderngl.TRIANGLES)
+        finally:
+            self.ctx.wireframe = False
+
     def render(self, params: LeafParams, size: Any = (256, 256), view: str = "top",
                background: ArrayLike | None = None, *, grid: tuple[int, int] = DEFAULT_GRID,
                samples: int | None = None, linear: bool = False) -> NDArray[Any]:

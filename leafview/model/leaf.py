@@ -32,6 +32,7 @@ from .params import Jitter, LeafParams
 __all__ = [
     "JITTER_TABLE_SIZE",
     "axis_frames",
+    "control_polygons",
     "jitter_table",
     "Partials",
     "partials",
@@ -102,6 +103,18 @@ def _side_controls(params: LeafParams) -> tuple[NDArray[np.float64], NDArray[np.
             cols.append(np.vstack([_BASE, mid, _APEX]))
         out.append(np.hstack(cols))
     return out[0], out[1]
+
+
+def control_polygons(params: LeafParams) -> dict[str, NDArray[np.float64]]:
+    """Control points of the curves of eqs 3-4 in leaf space, for drawing control polygons:
+    ``"A"`` (4, 3); ``"S+"``, ``"F+"``, ``"G+"`` (the u >= 0 half) and ``"S-"``, ``"F-"``,
+    ``"G-"`` (5, 3) each."""
+    plus, minus = _side_controls(params)
+    out = {"A": params.shape.axis_points()}
+    for sign, ctrl in (("+", plus), ("-", minus)):
+        for k, name in enumerate("SFG"):
+            out[name + sign] = ctrl[:, 3 * k:3 * k + 3].copy()
+    return out
 
 
 @dataclass(frozen=True)
