@@ -164,7 +164,7 @@ def test_interactive_draw_into_a_bound_framebuffer(gl, presets):
         for wire in (False, True):
             fbo.use()
             fbo.clear(0, 0, 0, 0, depth=1.0)
-            gl.draw(wireframe=wire)
+            gl.draw((5, 9), wireframe=wire)
             img = np.frombuffer(fbo.read(components=4), np.uint8).reshape(64, 64, 4)
             covered[wire] = np.count_nonzero(img[..., 3])
         assert covered[False] > 1000  # the filled leaf
