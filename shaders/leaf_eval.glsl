@@ -4,6 +4,10 @@
 #ifndef LEAFVIEW_LEAF_EVAL_GLSL
 #define LEAFVIEW_LEAF_EVAL_GLSL
 #include "bezier.glsl"
+#include "fbm.glsl"
+
+// the ripple signals (fBm, one row of RIPPLE_SAMPLES per (seed, beta)), written by fbm.comp
+layout(std430, binding = 3) readonly buffer Signals { float signals[]; };
 
 struct LeafEval {
     vec3 L;    // position (leaf space)
@@ -19,6 +23,80 @@ const vec3 LEAF_APEX = vec3(0.0, 1.0, 0.0);
 vec3 axis_normal(vec3 d) {
     vec3 m = vec3(-d.y, d.x, 0.0);
     return m / length(m);
+}
+
+// tau(v) = 1 - (2v - 1)^4 (x) and its derivative (y): zero at base and apex
+vec2 tip_taper(float v) {
+    float w = 2.0 * v - 1.0;
+    float w3 = w * w * w;
+    return vec2(1.0 - w3 * w, -8.0 * w3);
+}
+
+// Rippled margin (seed 002 eq. 5): D = tau(v) r(v) c(|u|) z, r = P [lambda + (1 - lambda) N(k veins v
+// + theta)], c(s) = s^2 (3 - s) / 2 the small-deflection shape of a tip-loaded cantilever (the
+// secondary vein from the midrib). numpy reference: leafview/model/leaf.py, _add_ripple.
+void add_ripple(LeafData d, float sigma, float s, float v, inout LeafEval e) {
+    vec4 rp = sigma > 0.0 ? d.ripple_l : d.ripple_r;  // P, lambda, k, theta
+    int base = int(d.deform.w) * RIPPLE_SAMPLES;
+    float t = rp.z * d.deform.z * v + rp.w;
+    vec2 n;
+    FBM_SAMPLE_PERIODIC(signals, base, RIPPLE_SAMPLES, t, n);
+    float r = rp.x * (rp.y + (1.0 - rp.y) * n.x);
+    float dr = rp.x * (1.0 - rp.y) * n.y * rp.z * d.deform.z;
+    vec2 tau = tip_taper(v);
+    float c = 0.5 * s * s * (3.0 - s);
+    float dc = 3.0 * s - 1.5 * s * s;
+    float g = tau.y * r + tau.x * dr;
+    e.L.z += tau.x * r * c;
+    e.Lu.z += sigma * tau.x * r * dc;
+    e.Lv.z += c * g;
+    e.Luv.z += sigma * dc * g;
+}
+
+mat3 cross_matrix(vec3 a) {
+    return mat3(0.0, a.z, -a.y, -a.z, 0.0, a.x, a.y, -a.x, 0.0);  // columns
+}
+
+// rotation about unit axis a by angle t (Rodrigues)
+mat3 axis_rotation(vec3 a, float t) {
+    float c = cos(t), s = sin(t);
+    return c * mat3(1.0) + s * cross_matrix(a) + (1.0 - c) * outerProduct(a, a);
+}
+
+vec4 bend_sample(LeafData d, int i) {
+    if (i < 0) return 2.0 * d.bend[0] - d.bend[1];
+    if (i >= BEND_SAMPLES) return 2.0 * d.bend[BEND_SAMPLES - 1] - d.bend[BEND_SAMPLES - 2];
+    return d.bend[i];
+}
+
+// Midrib bend and twist (seed 002 secs 4, 5.2.2): p' = A + Delta(v) + R(v) (p - A), R = R_N(Phi(v))
+// R_y(alpha v), Delta and Phi Catmull-Rom through the host's bend samples. numpy reference:
+// leafview/model/leaf.py, _bend, and leafview/model/beam.py, sample_clamped.
+void apply_bend(LeafData d, float v, vec3 Av, vec3 dAv, inout LeafEval e) {
+    float t = clamp(v, 0.0, 1.0) * float(BEND_SAMPLES - 1);
+    int i = min(int(floor(t)), BEND_SAMPLES - 2);
+    float x = t - float(i);
+    vec4 p0 = bend_sample(d, i - 1), p1 = bend_sample(d, i), p2 = bend_sample(d, i + 1), p3 = bend_sample(d, i + 2);
+    vec4 c1 = 0.5 * (p2 - p0);
+    vec4 c2 = p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3;
+    vec4 c3 = 0.5 * (p3 - p0) + 1.5 * (p1 - p2);
+    vec4 val = ((c3 * x + c2) * x + c1) * x + p1;                        // Delta.xyz, Phi
+    vec4 slope = ((3.0 * c3 * x + 2.0 * c2) * x + c1) * float(BEND_SAMPLES - 1);
+
+    vec3 axis = d.bend_axis.xyz;
+    float alpha = d.bend_axis.w;
+    const vec3 Y = vec3(0.0, 1.0, 0.0);
+    mat3 rn = axis_rotation(axis, val.w);
+    mat3 ry = axis_rotation(Y, alpha * v);
+    mat3 r = rn * ry;
+    mat3 dr = slope.w * (cross_matrix(axis) * r) + alpha * (rn * (cross_matrix(Y) * ry));
+    vec3 rel = e.L - Av;
+    vec3 Luv = dr * e.Lu + r * e.Luv;
+    vec3 Lv = dAv + slope.xyz + dr * rel + r * (e.Lv - dAv);
+    e.L = Av + val.xyz + r * rel;
+    e.Lu = r * e.Lu;
+    e.Lv = Lv;
+    e.Luv = Luv;
 }
 
 // Evaluation strategy (exactly eqs 3-6, rearranged; the numpy reference in leafview/model/leaf.py
@@ -85,9 +163,8 @@ LeafEval leaf_eval(LeafData d, sampler2D jitter_tex, vec2 uv) {
         float j1 = texelFetch(jitter_tex, ivec2(i1, int(d.jitter.w)), 0).r;
         float j = j0 + (j1 - j0) * fr;
         float dj = (j1 - j0) * d.jitter.y;
-        float w = 2.0 * v - 1.0;
-        float w3 = w * w * w;
-        float tau = 1.0 - w3 * w, dtau = -8.0 * w3;
+        vec2 taper = tip_taper(v);
+        float tau = taper.x, dtau = taper.y;
 
         vec3 m = vec3(-dAv.y, dAv.x, 0.0);
         vec3 a_dd = cubic_dt2(LEAF_BASE, a1, a2, LEAF_APEX, v);
@@ -102,6 +179,12 @@ LeafEval leaf_eval(LeafData d, sampler2D jitter_tex, vec2 uv) {
         e.Lu += (amp * 2.0 * s) * g;
         e.Lv += (amp * s * s * sigma) * dg;
         e.Luv += (amp * 2.0 * s) * dg;
+    }
+    if (d.deform.x > 0.0) {
+        add_ripple(d, sigma, s, v, e);
+    }
+    if (d.deform.y > 0.0) {
+        apply_bend(d, v, Av, dAv, e);
     }
     return e;
 }

@@ -150,7 +150,7 @@ def test_failed_save_leaves_no_file(tmp_path):
 def test_field_specs_cover_every_field_with_sane_ranges():
     specs = field_specs()
     d = LeafParams().to_dict()
-    expected = {f"{g}.{k}" for g in ("shape", "jitter", "material", "transform") for k in d[g]}
+    expected = {f"{g}.{k}" for g in ("shape", "jitter", "material", "transform", "ripple", "bending") for k in d[g]}
     assert set(specs) == expected
     for path, spec in specs.items():
         assert spec.soft_range[0] < spec.soft_range[1], path

@@ -29,6 +29,7 @@ from ..model.leaf import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table,
 from ..model.params import Jitter, LeafParams, Material, Shape, Transform
 from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, LEAVES_BINDING, pack_leaf, pack_leaves
 from .prepare import LeafPrepare
+from .ripple import RipplePass
 from .renderer import Lighting, fill_frame
 from .shaders import build_program
 
@@ -217,7 +218,8 @@ class InstancedLeaves(_Batch):
     """
 
     def __init__(self, ctx: moderngl.Context, records: Any, grid: tuple[int, int] = (9, 15), *,
-                 jitter_tables: ArrayLike | None = None) -> None:
+                 jitter_tables: ArrayLike | None = None,
+                 ripple_signals: Sequence[tuple[int, float]] = ()) -> None:
         super().__init__(ctx)
         try:
             recs = self.records = _as_records(records)
@@ -238,6 +240,9 @@ class InstancedLeaves(_Batch):
                                              bytes(LEAF_BLOCK.nbytes)))
             prepare = self._own(LeafPrepare(ctx))
             prepare.run(self.ssbo, self.count)  # derived per-leaf fields, one dispatch for all
+            # every leaf's ripple signal (rows as pack_leaves assigned them), one dispatch for all
+            self.ripples = self._own(RipplePass(ctx))
+            self.ripples.update(list(ripple_signals))
             table = (np.zeros((1, JITTER_TABLE_SIZE), np.float32) if jitter_tables is None
                      else np.ascontiguousarray(np.atleast_2d(np.asarray(jitter_tables, np.float32))))
             self.jitter_tex = self._own(ctx.texture((table.shape[1], table.shape[0]), 1,
@@ -255,6 +260,7 @@ class InstancedLeaves(_Batch):
         super()._bind()
         self.ssbo.bind_to_storage_buffer(LEAVES_BINDING)
         self.jitter_tex.use(location=0)
+        self.ripples.bind()
 
     def draw(self) -> None:
         """All leaves, one instanced draw, into the bound framebuffer (depth test on)."""

@@ -17,10 +17,12 @@ from typing import Any, Iterable
 
 from numpy.typing import NDArray
 
+from ..model.beam import BEND_SAMPLES, bend_profile
+from ..model.fbm import RIPPLE_SAMPLES
 from ..model.leaf import JITTER_TABLE_SIZE, jitter_table
 from ..model.params import LeafParams
 
-__all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "pack_leaf", "pack_leaves", "generated_sources"]
+__all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "pack_leaf", "pack_leaves", "ripple_keys", "generated_sources"]
 
 _TYPES = {"vec4": ("<f4", (4,)), "ivec4": ("<i4", (4,)), "mat4": ("<f4", (4, 4))}
 
@@ -33,6 +35,7 @@ class Block:
     block_name: str
     members: tuple[tuple[str, str, int], ...]
     doc: str = ""
+    derived: tuple[str, ...] = ()  # members computed from the others (not parameters)
 
     @property
     def dtype(self) -> np.dtype:
@@ -45,6 +48,12 @@ class Block:
     @property
     def nbytes(self) -> int:
         return self.dtype.itemsize
+
+    @property
+    def parameter_nbytes(self) -> int:
+        """Bytes of the members that hold parameters (all but the derived ones)."""
+        dt = self.dtype
+        return sum(dt.fields[name][0].itemsize for name, _, _ in self.members if name not in self.derived)
 
     def glsl(self, binding: int) -> str:
         lines = [f"// generated from leafview/gpu/layout.py: {self.doc}", f"struct {self.struct_name} {{"]
@@ -72,11 +81,18 @@ LEAF_BLOCK = Block(
         ("front", "vec4", 1),      # front rgb, translucency
         ("back", "vec4", 1),       # back rgb, unused
         ("model", "mat4", 1),      # leaf space -> world
+        ("deform", "vec4", 1),     # ripple on (0/1), bend on (0/1), secondary veins, signal row
+        ("ripple_l", "vec4", 1),   # P, λ, k, θ of eq. 5 for the u >= 0 half (left in the top view)
+        ("ripple_r", "vec4", 1),   # P, λ, k, θ for the u < 0 half
+        ("bend_axis", "vec4", 1),  # bend axis N (leaf space), twist at the apex (radians)
         # derived on the GPU by leaf_prepare.comp, packed so the vertex shader loads 6 vec4s:
         ("axis", "vec4", 3),       # xyz A(v̄_i), w (x̄s_i · n(v̄_i)).x
         ("heights", "vec4", 3),    # z̄f_i, z̄g_i, z̄s_i, (x̄s_i · n(v̄_i)).y   (n has no z, eq. 2)
+        # derived on the host by leafview.model.beam.bend_profile (eq. 4 by Newton's method):
+        ("bend", "vec4", BEND_SAMPLES),  # Δ_k (bent minus straight midrib), Φ_k at v = k/(K-1)
     ),
-    "one leaf: Ω, jitter, material, world transform; axis/heights written by leaf_prepare.comp",
+    "one leaf: Ω, jitter, material, transform, ripple and bend settings, then derived data",
+    derived=("axis", "heights", "bend"),
 )
 
 FRAME_BLOCK = Block(
@@ -97,8 +113,9 @@ LEAF_BINDING, FRAME_BINDING = 0, 1   # uniform blocks
 LEAVES_BINDING = 2                   # storage buffer of LeafData rows (instancing, prepare pass)
 
 
-def pack_leaf(params: LeafParams, out: np.ndarray | None = None) -> np.ndarray:
-    """Fill a LEAF_BLOCK record from ``params`` (float32, std140 = std430)."""
+def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: int = 0) -> np.ndarray:
+    """Fill a LEAF_BLOCK record from ``params`` (float32, std140 = std430); ``ripple_row`` is the
+    row of the ripple signal buffer holding this leaf's ``(seed, beta)`` signal."""
     rec = LEAF_BLOCK.zeros() if out is None else out
     s, j, m = params.shape, params.jitter, params.material
     rec["a1"][:3] = s.a1
@@ -113,7 +130,29 @@ def pack_leaf(params: LeafParams, out: np.ndarray | None = None) -> np.ndarray:
     rec["front"] = (*m.front, m.translucency)
     rec["back"] = (*m.back, 0.0)
     rec["model"] = params.transform.matrix().T  # column-major for GLSL
+    rip, bend = params.ripple, params.bending
+    rec["deform"] = (float(rip.enabled), float(bend.active), rip.veins, float(ripple_row))
+    for name, side in (("ripple_l", 0), ("ripple_r", 1)):
+        rec[name] = (rip.amplitude[side], rip.fluctuation[side], rip.interval[side], rip.phase[side])
+    if bend.active:
+        profile = bend_profile(params)
+        rec["bend_axis"] = (*profile.axis, profile.twist)
+        rec["bend"][:, :3] = profile.delta
+        rec["bend"][:, 3] = profile.phi
+    else:
+        rec["bend_axis"] = (1.0, 0.0, 0.0, 0.0)
+        rec["bend"] = 0.0
     return rec
+
+
+def ripple_keys(params: Iterable[LeafParams]) -> list[tuple[int, float]]:
+    """The distinct ``(seed, beta)`` ripple signals of leaves with ripples on, in order of first
+    use: row i of the signal buffer holds ``keys[i]`` (the rows :func:`pack_leaves` assigns)."""
+    keys: dict[tuple[int, float], int] = {}
+    for p in params:
+        if p.ripple.enabled:
+            keys.setdefault((p.ripple.seed, p.ripple.beta), len(keys))
+    return list(keys)
 
 
 def pack_leaves(params: Iterable[LeafParams]) -> tuple[NDArray[Any], NDArray[np.float32]]:
@@ -124,8 +163,9 @@ def pack_leaves(params: Iterable[LeafParams]) -> tuple[NDArray[Any], NDArray[np.
     recs = np.zeros(len(params), dtype=LEAF_BLOCK.dtype)
     rows: dict[int, int] = {}
     tables: list[NDArray[np.float32]] = []
+    ripple_rows = {key: row for row, key in enumerate(ripple_keys(params))}
     for i, p in enumerate(params):
-        pack_leaf(p, recs[i])
+        pack_leaf(p, recs[i], ripple_row=ripple_rows.get((p.ripple.seed, p.ripple.beta), 0))
         if p.jitter.enabled:
             row = rows.get(p.jitter.seed)
             if row is None:
@@ -139,6 +179,8 @@ def pack_leaves(params: Iterable[LeafParams]) -> tuple[NDArray[Any], NDArray[np.
 def generated_sources() -> dict[str, str]:
     """Virtual include files produced from the declarations above."""
     return {
-        "generated/leaf_block.glsl": LEAF_BLOCK.glsl(LEAF_BINDING),
+        "generated/constants.glsl": (f"#define RIPPLE_SAMPLES {RIPPLE_SAMPLES}\n"
+                                     f"#define BEND_SAMPLES {BEND_SAMPLES}\n"),
+        "generated/leaf_block.glsl": "#include \"generated/constants.glsl\"\n" + LEAF_BLOCK.glsl(LEAF_BINDING),
         "generated/frame_block.glsl": FRAME_BLOCK.glsl(FRAME_BINDING),
     }

@@ -18,8 +18,9 @@ from ..camera import VIEWS, Camera, frame_view
 from ..model.leaf import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table
 from ..model.params import LeafParams
 from .context import create_headless_context
-from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BINDING, LEAF_BLOCK, pack_leaf, pack_leaves
+from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BINDING, LEAF_BLOCK, pack_leaf, pack_leaves, ripple_keys
 from .prepare import LeafPrepare
+from .ripple import RipplePass
 from .shaders import build_program
 
 __all__ = ["LeafRenderer", "DEFAULT_GRID", "BATCH", "Lighting", "fill_frame"]
@@ -101,6 +102,7 @@ class LeafRenderer:
         self.program["Leaf"].binding = LEAF_BINDING
         self.program["Frame"].binding = FRAME_BINDING
         self.prepare = LeafPrepare(self.ctx)
+        self.ripples = RipplePass(self.ctx)
         self.leaf_ubo = self.ctx.buffer(reserve=LEAF_BLOCK.nbytes)
         self.frame_ubo = self.ctx.buffer(reserve=FRAME_BLOCK.nbytes)
         self.jitter_tex = self.ctx.texture((JITTER_TABLE_SIZE, 1), 1, dtype="f4")
@@ -129,7 +131,7 @@ class LeafRenderer:
         if self._capture_fbo is not None:
             _release([self._capture_fbo, *self._capture_fbo.color_attachments])
             self._capture_fbo = None
-        _release([self.program, self.prepare, self.leaf_ubo, self.frame_ubo, self.jitter_tex, self._capture_out,
+        _release([self.program, self.prepare, self.ripples, self.leaf_ubo, self.frame_ubo, self.jitter_tex, self._capture_out,
                   self._batch_leaf, self._batch_frame])
         self._capture_out = self._batch_leaf = self._batch_frame = None
         if self._owns_ctx:
@@ -152,6 +154,8 @@ class LeafRenderer:
 
         Changing jitter amplitude or density only changes the block: nothing is rebuilt.
         """
+        if params.ripple.enabled:  # re-synthesises only when seed or β changed
+            self.ripples.update([(params.ripple.seed, params.ripple.beta)])
         pack_leaf(params, self._leaf)
         self.leaf_ubo.write(self._leaf.tobytes())
         self.uploads += LEAF_BLOCK.nbytes
@@ -170,7 +174,11 @@ class LeafRenderer:
     def _bind(self) -> None:
         self.leaf_ubo.bind_to_uniform_block(LEAF_BINDING)
         self.frame_ubo.bind_to_uniform_block(FRAME_BINDING)
+        self._bind_tables()
+
+    def _bind_tables(self) -> None:
         self.jitter_tex.use(location=0)
+        self.ripples.bind()
 
     def grid(self, nu: int, nv: int) -> moderngl.VertexArray:
         """The (cached) vertex array of the (nu × nv) grid: (u, v) attributes and triangles."""
@@ -260,6 +268,9 @@ class LeafRenderer:
         n = len(leaves)
         records, tables = pack_leaves(leaves)
         self._upload_jitter(tables)
+        keys = ripple_keys(leaves)
+        if keys:
+            self.ripples.update(keys)  # one batched dispatch for every signal that changed
         self._batch_leaf, leaf_stride = self._write_records(self._batch_leaf, records)
         for i in range(n):  # rows sit at the uniform-offset alignment: one small dispatch each
             self.prepare.run(self._batch_leaf, 1, offset=i * leaf_stride)
@@ -283,7 +294,7 @@ class LeafRenderer:
         self.ctx.scissor = None
         draw_fbo.clear(*bg, depth=1.0)
         self.ctx.enable_only(moderngl.DEPTH_TEST)
-        self.jitter_tex.use(location=0)
+        self._bind_tables()
         vao = self.grid(*grid)
         for i in range(n):
             x, y = (i % cols) * w, (i // cols) * h
@@ -317,7 +328,7 @@ class LeafRenderer:
             self._capture_out = self.ctx.buffer(reserve=_grow(need))
         vao = self._grid_entry(*grid)[1]
         self._capture_target().use()
-        self.jitter_tex.use(location=0)
+        self._bind_tables()
         self.frame_ubo.bind_to_uniform_block(FRAME_BINDING)
         for i in range(n):
             self._batch_leaf.bind_to_uniform_block(LEAF_BINDING, offset=i * leaf_stride, size=LEAF_BLOCK.nbytes)

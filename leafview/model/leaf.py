@@ -26,7 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .beam import bend_profile, rotation, sample_clamped
 from .bezier import bernstein, derivative_points
+from .fbm import ripple_signal, sample_periodic
 from .params import Jitter, LeafParams
 
 __all__ = [
@@ -170,7 +172,66 @@ def partials(params: LeafParams, u: ArrayLike, v: ArrayLike) -> Partials:
     jit = params.jitter
     if jit.enabled and jit.amplitude > 0.0:
         L, Lu, Lv, Luv = _add_jitter(params, s, sigma, vv, pa_d, L, Lu, Lv, Luv)
+    if params.ripple.enabled:
+        L, Lu, Lv, Luv = _add_ripple(params, s, sigma, vv, L, Lu, Lv, Luv)
+    if params.bending.active:
+        L, Lu, Lv, Luv = _bend(bend_profile(params), vv, c[0], dc[0], L, Lu, Lv, Luv)
     return Partials(L, Lu, Lv, Luv)
+
+
+def _tip_taper(vv: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """τ(v) = 1 - (2v - 1)⁴ and its derivative: zero at base and apex, flat in the middle."""
+    w = 2.0 * vv - 1.0
+    return 1.0 - w**4, -8.0 * w**3
+
+
+def _add_ripple(params, s, sigma, vv, L, Lu, Lv, Luv):
+    """Rippled margin (seed 002 eq. 5): each cross-section is a secondary vein, a cantilever from
+    the midrib under the turbulent load ``r = P [λ + (1 - λ) N(k · veins · v + θ)]``. In the
+    small-deflection limit of eq. 4 a tip-loaded cantilever deflects as ``c(s) = s² (3 - s) / 2``
+    (zero with zero slope at the midrib, 1 at the margin), so ``D = τ(v) r(v) c(|u|) ẑ``: out of
+    the leaf plane (+z in leaf space, before bending), tapered to zero at base and apex."""
+    rip = params.ripple
+    signal = ripple_signal(rip.beta, rip.seed)
+    side = np.where(sigma > 0, 0, 1)  # pairs are [left (u >= 0), right (u < 0)]
+    amp, lam, k, theta = (np.asarray(getattr(rip, name))[side]
+                          for name in ("amplitude", "fluctuation", "interval", "phase"))
+    n_val, n_slope = sample_periodic(signal, k * rip.veins * vv + theta)
+    r = amp * (lam + (1.0 - lam) * n_val)
+    dr = amp * (1.0 - lam) * n_slope * k * rip.veins
+    tau, dtau = _tip_taper(vv)
+    c = 0.5 * s * s * (3.0 - s)
+    dc = 3.0 * s - 1.5 * s * s
+    g = dtau * r + tau * dr
+    z = np.array([0.0, 0.0, 1.0])
+    return (L + (tau * r * c)[:, None] * z, Lu + (sigma * tau * r * dc)[:, None] * z,
+            Lv + (c * g)[:, None] * z, Luv + (sigma * dc * g)[:, None] * z)
+
+
+def _bend(bp, vv, A, dA, L, Lu, Lv, Luv):
+    """Apply the midrib bend and twist (seed 002 sec. 5.2.2) to L and its partials.
+
+    ``p' = A(v) + Δ(v) + R(v) (p - A(v))`` with ``R = R_N(Φ(v)) R_y(α v)``: the cross-section at
+    v is twisted about the straight midrib's direction (y) through A(v), then turned with the
+    bent midrib; Φ and Δ are the Catmull-Rom splines through the bend samples
+    (:func:`leafview.model.beam.sample_clamped`)."""
+    phi, dphi = sample_clamped(bp.phi, vv)
+    delta, ddelta = sample_clamped(bp.delta, vv)
+    rn = rotation(bp.axis, phi)                         # (N, 3, 3)
+    ry = rotation([0.0, 1.0, 0.0], bp.twist * vv)
+    r = rn @ ry
+    kn = _cross_matrix(bp.axis)
+    ky = _cross_matrix([0.0, 1.0, 0.0])
+    dr = dphi[:, None, None] * (kn @ r) + bp.twist * (rn @ (ky @ ry))
+    rel = L - A
+    apply = lambda m, x: np.einsum("nij,nj->ni", m, x)  # noqa: E731
+    return (A + delta + apply(r, rel), apply(r, Lu),
+            dA + ddelta + apply(dr, rel) + apply(r, Lv - dA), apply(dr, Lu) + apply(r, Luv))
+
+
+def _cross_matrix(a) -> NDArray[np.float64]:
+    x, y, z = a
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def _add_jitter(params, s, sigma, vv, pa_d, L, Lu, Lv, Luv):
@@ -184,8 +245,7 @@ def _add_jitter(params, s, sigma, vv, pa_d, L, Lu, Lv, Luv):
     i1 = (i0 + 1) % size
     j = table[i0] + (table[i1] - table[i0]) * frac
     dj = (table[i1] - table[i0]) * jit.density
-    w = 2.0 * vv - 1.0
-    tau, dtau = 1.0 - w**4, -8.0 * w**3
+    tau, dtau = _tip_taper(vv)
 
     d1 = _curve(pa_d, vv)
     d2 = _curve(derivative_points(pa_d), vv)

@@ -28,6 +28,8 @@ __all__ = [
     "Jitter",
     "Material",
     "Transform",
+    "Ripple",
+    "Bending",
     "LeafParams",
     "field_specs",
 ]
@@ -63,12 +65,14 @@ class FieldSpec:
     soft_range: tuple[float, float]
     step: float
     hard_range: tuple[float | None, float | None] = (None, None)
-    kind: str = "float"  # float | int | bool | color | vec3 | rows
+    kind: str = "float"  # float | int | bool | color | vec3 | pair | rows
+    positive: bool = False  # strictly greater than zero
 
 
 def _spec(label: str, group: str, lo: float, hi: float, step: float, *, hard=(None, None),
-          kind: str = "float", default: Any) -> Any:
-    return field(default=default, metadata={"spec": FieldSpec(label, group, (lo, hi), step, hard, kind)})
+          kind: str = "float", positive: bool = False, default: Any) -> Any:
+    spec = FieldSpec(label, group, (lo, hi), step, hard, kind, positive)
+    return field(default=default, metadata={"spec": spec})
 
 
 @dataclass(frozen=True)
@@ -150,6 +154,52 @@ class Transform:
         return m
 
 
+Pair = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Ripple:
+    """Rippled margins (seed 002 sec. 5.2.3, eq. 5). Each cross-section is a secondary vein, a
+    cantilever from the midrib, under the turbulent load ``P [λ + (1 - λ) N(k i + θ)]`` with
+    ``N`` the fBm signal of ``beta`` and ``seed`` and ``i = veins · v``. Pairs are
+    ``[left, right]`` as seen in the top view (left: the u >= 0 half, -x)."""
+
+    enabled: bool = _spec("ripples on", "ripple", 0, 1, 1, kind="bool", default=False)
+    beta: float = _spec("β (spectral slope)", "ripple", 0.5, 3.0, 0.05, hard=(None, 8.0), positive=True,
+                        default=1.0)
+    seed: int = _spec("seed", "ripple", 0, 9999, 1, hard=(0, 2**31 - 1), kind="int", default=0)
+    veins: float = _spec("secondary veins along the blade", "ripple", 5, 200, 1, hard=(None, 4096.0),
+                         positive=True, default=60.0)
+    amplitude: Pair = _spec("load amplitude P [left, right]", "ripple", 0.0, 0.1, 0.001, hard=(0.0, 1.0),
+                            kind="pair", default=(0.02, 0.02))
+    fluctuation: Pair = _spec("λ [left, right]", "ripple", 0.0, 1.0, 0.01, hard=(0.0, 1.0), kind="pair",
+                              default=(0.2, 0.2))
+    interval: Pair = _spec("sampling interval k [left, right]", "ripple", 0.01, 1.0, 0.01, hard=(0.0, 64.0),
+                           kind="pair", default=(0.3, 0.3))
+    phase: Pair = _spec("phase θ [left, right]", "ripple", 0.0, 64.0, 0.1, kind="pair", default=(8.0, 10.0))
+
+
+@dataclass(frozen=True)
+class Bending:
+    """Cantilever bending of the midrib and petiole (seed 002 sec. 4, eq. 4, and sec. 5.2.2) under
+    a load along ``direction`` (world space, default gravity), and a twist about the midrib that
+    grows linearly to ``twist`` degrees at the apex. ``load`` is per unit blade area; only
+    ``load / stiffness`` matters for the shape."""
+
+    load: float = _spec("load", "bending", 0.0, 40.0, 0.1, hard=(0.0, 1e4), default=0.0)
+    direction: Vec3 = _spec("load direction (world)", "bending", -1, 1, 0.01, kind="vec3",
+                            default=(0.0, 0.0, -1.0))
+    stiffness: float = _spec("midrib EI", "bending", 0.05, 10.0, 0.01, positive=True, default=1.0)
+    twist: float = _spec("twist at the apex (degrees)", "bending", -180, 180, 1, hard=(-720.0, 720.0),
+                         default=0.0)
+    petiole_length: float = _spec("petiole length", "bending", 0.0, 0.5, 0.005, hard=(0.0, 10.0), default=0.0)
+    petiole_stiffness: float = _spec("petiole EI", "bending", 0.05, 10.0, 0.01, positive=True, default=1.0)
+
+    @property
+    def active(self) -> bool:
+        return self.load > 0.0 or self.twist != 0.0 or self.petiole_length > 0.0
+
+
 @dataclass(frozen=True)
 class LeafParams:
     """Everything that describes one leaf. ``shape`` is Ω; the rest are independent groups."""
@@ -158,6 +208,8 @@ class LeafParams:
     jitter: Jitter = field(default_factory=Jitter)
     material: Material = field(default_factory=Material)
     transform: Transform = field(default_factory=Transform)
+    ripple: Ripple = field(default_factory=Ripple)
+    bending: Bending = field(default_factory=Bending)
     name: str = ""
 
     # -- Ω as a flat vector -------------------------------------------------------------------
@@ -187,7 +239,7 @@ class LeafParams:
         out: dict[str, Any] = {"schema": SCHEMA_VERSION}
         if self.name:
             out["name"] = self.name
-        for group in ("shape", "jitter", "material", "transform"):
+        for group in _GROUPS:
             obj = getattr(self, group)
             out[group] = {f.name: _plain(getattr(obj, f.name)) for f in fields(obj)}
         return out
@@ -226,7 +278,8 @@ def field_specs() -> dict[str, FieldSpec]:
 
 # ---------------------------------------------------------------------------------------------
 # validation
-_GROUPS: dict[str, type] = {"shape": Shape, "jitter": Jitter, "material": Material, "transform": Transform}
+_GROUPS: dict[str, type] = {"shape": Shape, "jitter": Jitter, "material": Material, "transform": Transform,
+                             "ripple": Ripple, "bending": Bending}
 _TOP_KEYS = {"schema", "name", *_GROUPS}
 
 
@@ -258,6 +311,8 @@ def _vector(value: Any, n: int, path: str) -> tuple[float, ...]:
 
 
 def _check_range(x: float, spec: FieldSpec, path: str) -> None:
+    if spec.positive and not x > 0.0:
+        raise ParamError(path, f"{x!r} must be greater than 0")
     lo, hi = spec.hard_range
     if lo is not None and x < lo:
         raise ParamError(path, f"{x!r} is below the minimum {lo}")
@@ -275,8 +330,8 @@ def _parse_field(value: Any, spec: FieldSpec, path: str) -> Any:
             raise ParamError(path, f"expected an integer, got {type(value).__name__} {value!r}")
         _check_range(float(value), spec, path)
         return int(value)
-    if spec.kind in ("vec3", "color"):
-        vec = _vector(value, 3, path)
+    if spec.kind in ("vec3", "color", "pair"):
+        vec = _vector(value, 2 if spec.kind == "pair" else 3, path)
         for i, x in enumerate(vec):
             _check_range(x, spec, f"{path}[{i}]")
         return vec
@@ -309,6 +364,8 @@ def _parse_group(cls: type, data: Any, group: str, *, required: bool) -> Any:
     obj = cls(**values)
     if cls is Shape:
         _check_shape(obj)
+    if cls is Bending and not any(obj.direction):
+        raise ParamError(f"{group}.direction", "the load direction must not be the zero vector")
     return obj
 
 

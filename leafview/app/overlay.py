@@ -1,0 +1,147 @@
+"""Viewport overlays drawn with ``shaders/overlay.vert``/``overlay.frag``: the control polygons
+and curves of A, S±, F± and G± (as in seed 004 Figs. 1 and 7), the drag handles and the ground
+grid.
+
+Vertex data is rebuilt only when the leaf changes (the viewer passes its revision); every frame
+then costs one small uniform write and a few draws.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import moderngl
+import numpy as np
+from numpy.typing import NDArray
+
+from ..gpu.shaders import build_program
+from ..model.bezier import evaluate_curve
+from ..model.leaf import control_polygons
+from ..model.params import LeafParams
+from .handles import HANDLE_NAMES, handle_points, to_world
+
+__all__ = ["Overlay", "CURVE_COLORS", "control_lines", "ground_lines"]
+
+# sRGB colours (the target is 8-bit sRGB, like the leaf's output)
+CURVE_COLORS = {
+    "A": (0.95, 0.30, 0.20),   # axis: red
+    "S": (1.00, 0.82, 0.15),   # silhouette: yellow
+    "F": (0.25, 0.75, 1.00),   # F (1/3 width): blue
+    "G": (0.85, 0.45, 1.00),   # G (2/3 width): violet
+}
+HANDLE_COLOR = (1.0, 1.0, 1.0, 1.0)
+HANDLE_HOT = (1.0, 0.45, 0.1, 1.0)
+_CURVE_SAMPLES = 48
+_VERTEX = np.dtype([("pos", "f4", 3), ("color", "f4", 4)])
+
+
+def _segments(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """A polyline as GL_LINES pairs."""
+    return np.repeat(points, 2, axis=0)[1:-1]
+
+
+def control_lines(params: LeafParams) -> NDArray:
+    """Line vertices (world space) of every control polygon (dim) and curve (bright)."""
+    polys = control_polygons(params)
+    t = np.linspace(0.0, 1.0, _CURVE_SAMPLES)
+    chunks = []
+    for name, ctrl in polys.items():
+        rgb = CURVE_COLORS[name[0]]
+        for pts, alpha in ((ctrl, 0.55), (evaluate_curve(ctrl, t), 1.0)):
+            seg = _segments(to_world(params, pts))
+            v = np.zeros(len(seg), _VERTEX)
+            v["pos"], v["color"] = seg, (*rgb, alpha)
+            chunks.append(v)
+    return np.concatenate(chunks)
+
+
+def ground_lines(center: Sequence[float], z: float, half: float, step: float) -> NDArray:
+    """A square grid of lines in the plane ``z``, centred under ``center`` (world xy)."""
+    n = max(1, int(round(half / step)))
+    cx, cy = round(center[0] / step) * step, round(center[1] / step) * step
+    ticks = np.arange(-n, n + 1) * step
+    lines = []
+    for t in ticks:
+        lines += [(cx + t, cy - n * step, z), (cx + t, cy + n * step, z),
+                  (cx - n * step, cy + t, z), (cx + n * step, cy + t, z)]
+    v = np.zeros(len(lines), _VERTEX)
+    v["pos"] = lines
+    major = np.repeat(np.abs(ticks) < 1e-9, 4)
+    v["color"] = np.where(major[:, None], (0.55, 0.58, 0.62, 0.9), (0.38, 0.40, 0.44, 0.6))
+    return v
+
+
+class Overlay:
+    """GL objects for the overlays of one context; :meth:`release` frees them."""
+
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self.ctx = ctx
+        self.program = build_program(ctx, "overlay.vert", "overlay.frag")
+        self.vbo = ctx.buffer(reserve=1 << 16, dynamic=True)
+        self.vao = ctx.vertex_array(self.program, [(self.vbo, "3f 4f", "in_pos", "in_color")])
+        self._lines = np.zeros(0, _VERTEX)
+        self._ground = np.zeros(0, _VERTEX)
+        self._handles = np.zeros(0, _VERTEX)
+        self._key: tuple | None = None
+        self.handle_world = np.zeros((0, 3))
+        self.handle_names: tuple[str, ...] = HANDLE_NAMES
+
+    def update(self, params: LeafParams, revision: int, ground_center: Sequence[float], ground_z: float,
+               ground_half: float) -> None:
+        """Rebuild the vertex data if the leaf (``revision``) or the ground placement changed."""
+        key = (revision, tuple(np.round(ground_center, 6)), round(ground_z, 6), round(ground_half, 6))
+        if key == self._key:
+            return
+        self._key = key
+        self._lines = control_lines(params)
+        hp = handle_points(params)
+        self.handle_world = to_world(params, np.array([hp[n] for n in self.handle_names]))
+        step = 10 ** np.floor(np.log10(max(ground_half, 1e-3) / 2.0))
+        self._ground = ground_lines(ground_center, ground_z, ground_half, step)
+
+    def _draw(self, data: NDArray, mode: int, view_proj: NDArray[np.float64], point_size: float = 1.0,
+              round_points: bool = False) -> None:
+        if len(data) == 0:
+            return
+        raw = data.tobytes()
+        if len(raw) > self.vbo.size:
+            self.vbo.orphan(1 << (len(raw) - 1).bit_length())
+        self.vbo.write(raw)
+        self.program["view_proj"].write(view_proj.T.astype("f4").tobytes())
+        self.program["point_size"].value = float(point_size)
+        self.program["round_points"].value = bool(round_points)
+        self.vao.render(mode, vertices=len(data))
+
+    def draw_ground(self, view_proj: NDArray[np.float64]) -> None:
+        """The ground grid, depth-tested against the leaf, blended."""
+        self.ctx.enable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        self.ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        try:
+            self._draw(self._ground, moderngl.LINES, view_proj)
+        finally:
+            self.ctx.disable(moderngl.BLEND)
+
+    def draw_controls(self, view_proj: NDArray[np.float64], hot: str | None = None) -> None:
+        """Control polygons, curves and handles, on top of the leaf (no depth test)."""
+        ctx = self.ctx
+        ctx.disable(moderngl.DEPTH_TEST)
+        ctx.enable(moderngl.BLEND | moderngl.PROGRAM_POINT_SIZE)
+        ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        try:
+            self._draw(self._lines, moderngl.LINES, view_proj)
+            pts = np.zeros(len(self.handle_world), _VERTEX)
+            pts["pos"] = self.handle_world
+            pts["color"] = HANDLE_COLOR
+            self._draw(pts, moderngl.POINTS, view_proj, point_size=9.0, round_points=True)
+            if hot in self.handle_names:
+                i = self.handle_names.index(hot)
+                self._draw(pts[i:i + 1].copy(), moderngl.POINTS, view_proj, point_size=14.0, round_points=True)
+                hot_pt = pts[i:i + 1].copy()
+                hot_pt["color"] = HANDLE_HOT
+                self._draw(hot_pt, moderngl.POINTS, view_proj, point_size=10.0, round_points=True)
+        finally:
+            ctx.disable(moderngl.BLEND | moderngl.PROGRAM_POINT_SIZE)
+
+    def release(self) -> None:
+        for obj in (self.vao, self.vbo, self.program):
+            obj.release()

@@ -1,0 +1,191 @@
+"""The parameter panel: one imgui widget per field of :func:`~leafview.model.params.field_specs`,
+grouped by ``FieldSpec.group``, plus the sec. 6 edit sliders and the view settings.
+
+Nothing here knows the parameter groups by name: a group added to ``LeafParams`` (ripple,
+bending, ...) gets a collapsing header and widgets from its metadata (label, soft range, step,
+kind). Every change goes through :class:`~leafview.app.state.ViewerState`; a slider drag is one
+undo step (a *gesture* that ends when the widget is released).
+
+:attr:`ParamPanel.rects` records where each widget was drawn (by field path), which is how the
+tests click and drag the real widgets through imgui's input queue.
+"""
+
+from __future__ import annotations
+
+import math
+import unicodedata
+from typing import Any, Callable
+
+from imgui_bundle import imgui
+
+from ..model.edits import curve_axis, curve_longitudinal, scale_width, skew_axis
+from ..model.params import FieldSpec, LeafParams
+from .state import ViewerState
+
+__all__ = ["ParamPanel", "decimals", "groups_of"]
+
+_OPEN_BY_DEFAULT = {"axis", "silhouette", "curvature", "jitter", "ripple", "bending", "material"}
+
+
+def decimals(step: float) -> int:
+    """Digits after the decimal point that show a slider's ``step``."""
+    if step <= 0 or not math.isfinite(step) or step >= 1:
+        return 0
+    return min(6, int(math.ceil(-math.log10(step) - 1e-9)))
+
+
+def groups_of(specs: dict[str, FieldSpec]) -> dict[str, list[str]]:
+    """Field paths by ``spec.group``, groups in order of first appearance."""
+    out: dict[str, list[str]] = {}
+    for path, spec in specs.items():
+        out.setdefault(spec.group, []).append(path)
+    return out
+
+
+def plain_label(text: str) -> str:
+    """``text`` without combining marks (for fonts that lack them: v̄ becomes v)."""
+    return "".join(c for c in unicodedata.normalize("NFD", text) if not unicodedata.combining(c))
+
+
+class ParamPanel:
+    """Draws the parameter widgets inside the current imgui window.
+
+    Parameters
+    ----------
+    state:
+        The shared viewer state every widget edits.
+    unicode_labels:
+        False when the loaded font has no combining marks: labels are shown without them.
+    """
+
+    def __init__(self, state: ViewerState, *, unicode_labels: bool = True) -> None:
+        self.state = state
+        self.unicode_labels = unicode_labels
+        self.rects: dict[str, tuple[float, float, float, float]] = {}
+        self._relative: dict[str, float] = {"width": 1.0, "skew": 0.0}
+        self._base: dict[str, LeafParams] = {}
+
+    def label(self, text: str, path: str) -> str:
+        shown = text if self.unicode_labels else plain_label(text)
+        return f"{shown}##{path}"
+
+    def _record(self, key: str) -> None:
+        lo, hi = imgui.get_item_rect_min(), imgui.get_item_rect_max()
+        self.rects[key] = (lo.x, lo.y, hi.x, hi.y)
+
+    def _after_widget(self, key: str) -> None:
+        self._record(key)
+        if imgui.is_item_deactivated():
+            self.state.end_gesture()
+
+    # -- fields from their metadata -------------------------------------------------------------
+    def draw_field(self, path: str, spec: FieldSpec) -> None:
+        """One widget for ``path``, chosen by ``spec.kind``."""
+        state = self.state
+        value = state.get(path)
+        lo, hi = spec.soft_range
+        fmt = f"%.{decimals(spec.step)}f"
+        label = self.label(spec.label, path)
+        kind = spec.kind
+        if kind == "bool":
+            changed, new = imgui.checkbox(label, bool(value))
+        elif kind == "int":
+            changed, new = imgui.slider_int(label, int(value), int(lo), int(hi))
+        elif kind == "float":
+            changed, new = imgui.slider_float(label, float(value), float(lo), float(hi), fmt)
+        elif kind == "color":
+            changed, new = imgui.color_edit3(label, [float(x) for x in value], imgui.ColorEditFlags_.float)
+        elif kind == "vec3":
+            changed, new = imgui.slider_float3(label, [float(x) for x in value], float(lo), float(hi), fmt)
+        elif kind == "rows":
+            self._draw_rows(path, spec, value, fmt)
+            return
+        else:  # a kind this panel does not know yet: show it, never crash
+            imgui.text_disabled(f"{plain_label(spec.label)}: {value!r} ({kind})")
+            self._record(path)
+            return
+        if changed:
+            state.set_field(path, new, gesture=kind not in ("bool",))
+        self._after_widget(path)
+
+    def _draw_rows(self, path: str, spec: FieldSpec, value: Any, fmt: str) -> None:
+        lo, hi = spec.soft_range
+        imgui.text(spec.label if self.unicode_labels else plain_label(spec.label))
+        rows = [list(map(float, r)) for r in value]
+        for i, row in enumerate(rows):
+            key = f"{path}[{i}]"
+            changed, new = imgui.slider_float3(f"S{i + 1}##{key}", row, float(lo), float(hi), fmt)
+            if changed:
+                rows[i] = new
+                self.state.set_field(path, rows, gesture=True)
+            self._after_widget(key)
+
+    def draw_groups(self) -> None:
+        """A collapsing header per parameter group, in field_specs order."""
+        specs = self.state.specs()
+        for group, paths in groups_of(specs).items():
+            if group in _OPEN_BY_DEFAULT:
+                imgui.set_next_item_open(True, imgui.Cond_.first_use_ever)
+            if imgui.collapsing_header(f"{group.capitalize()}##group-{group}"):
+                imgui.push_id(group)
+                for path in paths:
+                    self.draw_field(path, specs[path])
+                imgui.pop_id()
+
+    # -- the artist edits of sec. 6 -------------------------------------------------------------
+    def _relative_slider(self, key: str, label: str, lo: float, hi: float, fmt: str,
+                         edit: Callable[[LeafParams, float], LeafParams]) -> None:
+        """A slider relative to the leaf at the start of the drag; it springs back on release."""
+        changed, value = imgui.slider_float(f"{label}##edit-{key}", self._relative[key], lo, hi, fmt)
+        if changed:
+            base = self._base.setdefault(key, self.state.params)
+            self._relative[key] = value
+            self.state.apply(lambda _: edit(base, value), gesture=f"edit:{key}")
+        self._record(f"edit:{key}")
+        if imgui.is_item_deactivated():
+            self.state.end_gesture()
+            self._base.pop(key, None)
+            self._relative[key] = 1.0 if key == "width" else 0.0
+
+    def _absolute_slider(self, key: str, label: str, value: float, edit: Callable[[LeafParams, float], LeafParams]) -> None:
+        changed, new = imgui.slider_float(f"{label}##edit-{key}", float(value), -0.3, 0.3, "%.3f")
+        if changed:
+            self.state.apply(lambda p: edit(p, new), gesture=f"edit:{key}")
+        self._after_widget(f"edit:{key}")
+
+    def draw_edits(self) -> None:
+        """Width scaling, asymmetry and curvature sliders (seed 004 sec. 6, Fig. 7)."""
+        imgui.set_next_item_open(True, imgui.Cond_.first_use_ever)
+        if not imgui.collapsing_header("Edits (seed 004 sec. 6)##group-edits"):
+            return
+        sh = self.state.params.shape
+        self._relative_slider("width", "width ×", 0.25, 2.5, "×%.2f", scale_width)
+        self._relative_slider("skew", "asymmetry (skew axis)", -0.3, 0.3, "%+.3f", skew_axis)
+        self._absolute_slider("axis", "axis curvature (a1, a2 z)", (sh.a1[2] + sh.a2[2]) / 2, curve_axis)
+        for curve, zs in (("S", [r[2] for r in sh.silhouette]), ("F", sh.zf), ("G", sh.zg)):
+            self._absolute_slider(f"curve{curve}", f"{curve} curvature (z̄{curve.lower()})"
+                                  if self.unicode_labels else f"{curve} curvature (z{curve.lower()})",
+                                  sum(zs) / 3, lambda p, z, c=curve: curve_longitudinal(p, c, z))
+        imgui.text_disabled("drag the white handles in the viewport:\na1, a2 skew the axis; s1-s3 shape the outline")
+
+    # -- view settings (not saved with the leaf) ------------------------------------------------
+    def draw_view(self) -> None:
+        """Light direction, grid resolution and viewport toggles."""
+        if not imgui.collapsing_header("View##group-view"):
+            return
+        view = self.state.view
+        _, view.light_azimuth = imgui.slider_float("light azimuth##view", view.light_azimuth, -180.0, 180.0, "%.0f°")
+        self._record("view.light_azimuth")
+        _, view.light_elevation = imgui.slider_float("light elevation##view", view.light_elevation, -90.0, 90.0,
+                                                     "%.0f°")
+        self._record("view.light_elevation")
+        changed, grid = imgui.slider_int2("grid (u, v)##view", list(view.grid), 3, 257)
+        self._record("view.grid")
+        if changed:
+            view.grid = (max(3, min(257, int(grid[0]))), max(3, min(513, int(grid[1]))))
+        _, view.wireframe = imgui.checkbox("wireframe (W)##view", view.wireframe)
+        self._record("view.wireframe")
+        _, view.show_controls = imgui.checkbox("control polygons + handles (C)##view", view.show_controls)
+        self._record("view.show_controls")
+        _, view.show_ground = imgui.checkbox("ground grid (G)##view", view.show_ground)
+        self._record("view.show_ground")
