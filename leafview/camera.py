@@ -15,6 +15,8 @@ Views:
     shows the cross-section curvature.
 ``three-quarter``
     Perspective from azimuth 35° (towards +x from the front) and 50° elevation.
+``side``
+    Perspective from +x, 15° above the leaf plane: shows droop, twist and rippled margins.
 """
 
 from __future__ import annotations
@@ -27,8 +29,8 @@ from numpy.typing import NDArray
 
 __all__ = ["VIEWS", "Camera", "frame_view"]
 
-VIEWS = ("top", "front", "three-quarter")
-_ORBITS = {"front": (0.0, 20.0), "three-quarter": (35.0, 50.0)}
+VIEWS = ("top", "front", "three-quarter", "side")
+_ORBITS = {"front": (0.0, 20.0), "three-quarter": (35.0, 50.0), "side": (90.0, 15.0)}
 FOV_DEG = 30.0
 TOP_FILL = 0.9
 

@@ -16,7 +16,7 @@ from . import __version__
 from .model.params import LeafParams, ParamError
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
-_VIEWS = ("top", "front", "three-quarter")
+_VIEWS = ("top", "front", "three-quarter", "side")
 
 
 class UsageError(Exception):
@@ -66,6 +66,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     sub.add_parser("presets", help="list the built-in presets")
 
+    from .app.cli import add_arguments as add_view_arguments
+
+    v = sub.add_parser("view", help="open the interactive viewer window",
+                       description="Edit a leaf live: every parameter on a slider, control points "
+                                   "dragged in the viewport, undo/redo, presets. H in the window "
+                                   "shows the keys.")
+    add_view_arguments(v)
+
     b = sub.add_parser("bench", help="measure rendering speed (prints GL_RENDERER and ratios)")
     b.add_argument("--json", action="store_true", help="print the results as JSON")
     b.add_argument("--quick", action="store_true", help="small counts: a smoke run, not a measurement")
@@ -80,6 +88,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _render(args)
         if args.command == "presets":
             return _presets()
+        if args.command == "view":
+            from .app.cli import view_main
+
+            return view_main(args)
         if args.command == "bench":
             from .benchmarks import main as bench_main
 

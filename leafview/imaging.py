@@ -62,6 +62,7 @@ def write_image(path: str | os.PathLike[str], pixels: NDArray[Any], *, params: L
         data = np.ascontiguousarray(pixels)
         spec = oiio.ImageSpec(w, h, c, "uint8")
         spec.attribute("oiio:ColorSpace", "sRGB")
+        spec.attribute("oiio:UnassociatedAlpha", 1)  # our 8-bit pixels carry straight alpha
     spec.attribute("Software", f"leafview {__version__}")
     if description:
         spec.attribute("ImageDescription", description)
@@ -88,7 +89,9 @@ def write_image(path: str | os.PathLike[str], pixels: NDArray[Any], *, params: L
 
 def read_image(path: str | os.PathLike[str]) -> tuple[NDArray[Any], dict[str, Any]]:
     """Read pixels (native type) and the metadata that leafview writes (for tests and tools)."""
-    inp = oiio.ImageInput.open(str(path))
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)  # keep PNG/TIFF straight alpha as written
+    inp = oiio.ImageInput.open(str(path), config)
     if inp is None:
         raise ImageWriteError(f"{path}: cannot open: {oiio.geterror()}")
     try:

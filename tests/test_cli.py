@@ -45,7 +45,7 @@ def test_directory_of_thumbnails_and_sheet(gl, tmp_path, capsys):
     assert main(["render", str(ROOT / "assets/presets"), "-o", str(tmp_path / "thumbs"), "--size", "48"]) == 0
     written = sorted(p.stem for p in (tmp_path / "thumbs").iterdir())
     assert written == sorted(builtin_presets())
-    assert "wrote 14 png thumbnails" in capsys.readouterr().out
+    assert f"wrote {len(builtin_presets())} png thumbnails" in capsys.readouterr().out
     assert main(["render", "ovate", "linear", "curled", "--sheet", "-o", str(tmp_path / "sheet.png"),
                  "--size", "64", "--view", "three-quarter", "-q"]) == 0
     sheet, _ = read_image(tmp_path / "sheet.png")
@@ -131,7 +131,7 @@ def test_argparse_errors_exit_2(capsys):
         main(["render", "ovate", "-o", "x.png", "--size", "huge"])
     assert info.value.code == 2
     with pytest.raises(SystemExit) as info:
-        main(["render", "ovate", "-o", "x.png", "--view", "side"])
+        main(["render", "ovate", "-o", "x.png", "--view", "sideways"])
     assert info.value.code == 2
 
 
@@ -153,3 +153,15 @@ def test_gl_unavailable_is_a_message_not_a_traceback(tmp_path):
     assert "apt-get install libegl1 libgl1-mesa-dri" in result.stderr
     assert "Traceback" not in result.stderr
     assert not (tmp_path / "x.png").exists()
+
+
+def test_png_round_trip_keeps_straight_alpha(gl, tmp_path):
+    """Partially covered edge pixels read back exactly as written (no premultiplication)."""
+    from leafview.imaging import write_image
+
+    img = gl.render(LeafParams.load(ROOT / "assets/presets/maize.toml"), (96, 96), "side")
+    partial = (img[..., 3] > 0) & (img[..., 3] < 255)
+    assert partial.sum() > 50
+    write_image(tmp_path / "a.png", img)
+    back, _ = read_image(tmp_path / "a.png")
+    np.testing.assert_array_equal(back, img)

@@ -23,7 +23,8 @@ MAX_BAD_FRACTION = 0.005
 
 CASES = [(name, "top") for name in ("ovate", "lanceolate", "orbicular", "acuminate", "asymmetric", "serrate",
                                     "deltoid")] + [("curled", "three-quarter"), ("serrate", "three-quarter"),
-                                                   ("elliptic", "front")]
+                                                   ("elliptic", "front"), ("holly", "three-quarter"),
+                                                   ("maize", "side"), ("willow", "side")]
 
 
 def compare(actual: np.ndarray, reference: np.ndarray) -> tuple[float, int]:

@@ -113,7 +113,7 @@ def test_module_level_render_and_errors(gl, presets):
     img = leafview.render(presets["ovate"], size=(80, 60))
     assert img.shape == (60, 80, 4)
     with pytest.raises(ValueError, match="unknown view"):
-        leafview.render(presets["ovate"], view="side")
+        leafview.render(presets["ovate"], view="bottom")
     with pytest.raises(ValueError, match="size"):
         leafview.render(presets["ovate"], size=(0, 10))
     with pytest.raises(ValueError, match="background"):

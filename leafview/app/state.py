@@ -109,6 +109,7 @@ class ViewerState:
         self.saved = self.params           # what is on disk (for the unsaved-changes check)
         self.builtin_dir = builtin_dir
         self.revision = 0
+        self.loads = 0                     # incremented by every successful open()
         self.error: str | None = None
         self.message = ""
         self.view = ViewSettings()
@@ -227,6 +228,7 @@ class ViewerState:
         self._redo.clear()
         self._gesture = None
         self._set(params)
+        self.loads += 1
         self.error = None
         self.message = f"opened {p}"
         return True

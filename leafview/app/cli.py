@@ -1,0 +1,79 @@
+"""``leafview view [PRESET]``: argument checks and the run (called from :mod:`leafview.cli`).
+
+Bad input (an unknown preset, a malformed file, a bad ``--size`` or ``--screenshot`` name) is
+reported before any window opens, with exit code 2; no display or no OpenGL 4.5 exits 1 with
+what to install.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+__all__ = ["add_arguments", "view_main", "window_size"]
+
+
+def window_size(text: str) -> tuple[int, int]:
+    """``WxH`` → (w, h), each 64..8192."""
+    try:
+        w, h = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1280x800, got {text!r}") from None
+    if not (64 <= w <= 8192 and 64 <= h <= 8192):
+        raise argparse.ArgumentTypeError(f"window size {w}x{h} outside 64..8192 per side")
+    return w, h
+
+
+def _frames(text: str) -> int:
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of frames, got {text!r}") from None
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"--frames must be at least 1, got {n}")
+    return n
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``leafview view``."""
+    parser.add_argument("preset", nargs="?", default="ovate", metavar="PRESET",
+                        help="a .toml/.json preset or a built-in name (default: ovate)")
+    parser.add_argument("--size", type=window_size, default=(1280, 800), metavar="WxH",
+                        help="window size (default 1280x800)")
+    parser.add_argument("--frames", type=_frames, default=None, metavar="N",
+                        help="run N frames and exit (scripted runs, CI); no unsaved-edit question")
+    parser.add_argument("--screenshot", default=None, metavar="FILE",
+                        help="after the last frame, write the whole window (scene and panel) as PNG/TIFF")
+    parser.add_argument("--dev", action="store_true",
+                        help="hot-reload shaders/ when the files change (errors shown, old shaders kept)")
+    parser.add_argument("--samples", type=int, choices=(0, 2, 4, 8), default=4,
+                        help="multisampling of the scene (default 4)")
+
+
+def view_main(args: argparse.Namespace) -> int:
+    """Run the viewer for parsed ``args``; returns the exit code."""
+    from ..cli import UsageError
+    from ..imaging import format_of
+    from ..model.params import LeafParams
+    from ..resources import builtin_presets, resolve_preset
+    from .viewer import open_state
+
+    path = resolve_preset(args.preset)
+    if not path.exists() and not path.suffix:
+        raise UsageError(f"{args.preset}: no such file or built-in preset "
+                         f"(built-in: {', '.join(builtin_presets())})")
+    if path.is_dir():
+        raise UsageError(f"{path} is a directory: give one preset file or a built-in name")
+    if args.screenshot is not None:
+        fmt = format_of(args.screenshot)
+        if fmt not in ("png", "tif"):
+            raise UsageError(f"--screenshot {args.screenshot}: use a .png or .tif file name")
+        if Path(args.screenshot).is_dir():
+            raise UsageError(f"--screenshot {args.screenshot} is a directory; give a file name")
+    params = LeafParams.load(path)  # ParamError → exit 2, naming the file and field
+    state = open_state(params, path)
+
+    from .window import ViewerWindow
+
+    with ViewerWindow(state, args.size, dev=args.dev, samples=args.samples) as window:
+        return window.run(frames=args.frames, screenshot=args.screenshot)

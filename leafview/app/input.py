@@ -1,0 +1,137 @@
+"""Keyboard shortcuts and viewport mouse handling, read from imgui's io every frame.
+
+Left drag orbits (or, on a handle, moves that control point), middle or shift+left drag pans,
+the wheel dollies. Shortcuts act only when imgui does not want the keyboard (no text field is
+being typed in) and no question is open. See :data:`leafview.app.chrome.KEYS`.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from imgui_bundle import imgui
+
+from .handles import drag_handle, drag_plane_normal, pick, plane_hit, to_leaf_space
+from .orbit import project
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .viewer import Viewer
+
+__all__ = ["ViewportInput"]
+
+PICK_RADIUS = 10.0
+
+
+class ViewportInput:
+    """The viewport's interaction state: the current drag and the handle under the mouse."""
+
+    def __init__(self, viewer: "Viewer") -> None:
+        self.viewer = viewer
+        self.drag: dict[str, Any] | None = None   # kind, button, (handle, plane point, normal)
+        self.hot: str | None = None
+
+    def update(self, scene_w: float, h: int) -> None:
+        """Call between ``imgui.new_frame()`` and drawing the panel."""
+        io = imgui.get_io()
+        if not io.want_capture_keyboard and not self.viewer.files.asking:
+            self._shortcuts(scene_w / max(h, 1))
+        self._mouse(io, scene_w, h)
+
+    # -- keys -------------------------------------------------------------------------------------
+    def _shortcuts(self, aspect: float) -> None:
+        v = self.viewer
+        state, view = v.state, v.state.view
+        io = imgui.get_io()
+        key = imgui.Key
+
+        def pressed(k: Any) -> bool:
+            return imgui.is_key_pressed(k, False)
+
+        if io.key_ctrl:
+            if pressed(key.z):
+                state.redo() if io.key_shift else state.undo()
+            elif pressed(key.y):
+                state.redo()
+            elif pressed(key.s):
+                v.files.save()
+            return
+        if pressed(key.r):
+            v.frame_leaf(aspect, reset=True)
+        if pressed(key.f):
+            v.frame_leaf(aspect, reset=False)
+        if pressed(key.w):
+            view.wireframe = not view.wireframe
+        if pressed(key.c):
+            view.show_controls = not view.show_controls
+        if pressed(key.g):
+            view.show_ground = not view.show_ground
+        if pressed(key.p):
+            v.screenshot_requested = True
+        if pressed(key.h) or pressed(key.f1):
+            view.show_help = not view.show_help
+        if pressed(key.escape) or pressed(key.q):
+            v.files.request_quit()
+
+    # -- mouse ------------------------------------------------------------------------------------
+    def _handles_on_screen(self, scene_w: float, h: int) -> np.ndarray:
+        v = self.viewer
+        assert v.overlay is not None
+        cam = v.camera.camera(int(round(scene_w)), h)
+        return project(cam, v.overlay.handle_world, int(round(scene_w)), h)
+
+    def _mouse(self, io: Any, scene_w: float, h: int) -> None:
+        v = self.viewer
+        mx, my = io.mouse_pos.x, io.mouse_pos.y
+        inside = 0.0 <= mx < scene_w and 0.0 <= my < h
+        controls = v.state.view.show_controls and v.overlay is not None
+        if self.drag is None:
+            self.hot = None
+            if inside and controls and not io.want_capture_mouse and len(v.overlay.handle_world):
+                self.hot = pick(self._handles_on_screen(scene_w, h), v.overlay.handle_names, mx, my, PICK_RADIUS)
+        if self.drag is None and inside and not io.want_capture_mouse and not v.files.asking:
+            if imgui.is_mouse_clicked(imgui.MouseButton_.left):
+                if self.hot is not None:
+                    self._start_handle(self.hot, scene_w, h)
+                else:
+                    self.drag = {"kind": "pan" if io.key_shift else "orbit", "button": imgui.MouseButton_.left}
+            elif imgui.is_mouse_clicked(imgui.MouseButton_.middle):
+                self.drag = {"kind": "pan", "button": imgui.MouseButton_.middle}
+            if io.mouse_wheel:
+                v.camera.dolly(float(io.mouse_wheel))
+        if self.drag is None:
+            return
+        if not imgui.is_mouse_down(self.drag["button"]):
+            if self.drag["kind"] == "handle":
+                v.state.end_gesture()
+            self.drag = None
+            return
+        dx, dy = io.mouse_delta.x, io.mouse_delta.y
+        kind = self.drag["kind"]
+        if kind == "orbit" and (dx or dy):
+            v.camera.orbit(dx, dy)
+        elif kind == "pan" and (dx or dy):
+            v.camera.pan(dx, dy, h)
+        elif kind == "handle" and (dx or dy):
+            self._move_handle(mx, my, scene_w, h)
+
+    def _start_handle(self, name: str, scene_w: float, h: int) -> None:
+        v = self.viewer
+        assert v.overlay is not None
+        point = v.overlay.handle_world[v.overlay.handle_names.index(name)]
+        view_dir = point - v.camera.eye()
+        normal = drag_plane_normal(v.state.params, view_dir / np.linalg.norm(view_dir))
+        self.drag = {"kind": "handle", "button": imgui.MouseButton_.left, "handle": name,
+                     "point": point, "normal": normal}
+        self.hot = name
+
+    def _move_handle(self, mx: float, my: float, scene_w: float, h: int) -> None:
+        v, d = self.viewer, self.drag
+        assert d is not None
+        origin, direction = v.camera.ray(mx, my, int(round(scene_w)), h)
+        hit = plane_hit(origin, direction, d["point"], d["normal"])
+        if hit is None:
+            return
+        leaf_point = to_leaf_space(v.state.params, hit)[0]
+        name = d["handle"]
+        v.state.apply(lambda p: drag_handle(p, name, leaf_point), gesture=f"handle:{name}")

@@ -1,0 +1,368 @@
+"""The viewer without its window: one :meth:`Viewer.frame` draws the leaf, the overlays and the
+imgui panel into an offscreen framebuffer, from imgui's io (keys, mouse) and the shared
+:class:`~leafview.app.state.ViewerState`.
+
+:mod:`leafview.app.window` feeds it glfw input and copies the frame to the screen; the tests and
+``leafview bench`` drive it on a headless EGL context with injected imgui events. An edit made
+during a frame (panel, handle drag, shortcut) is uploaded (the 320-byte Leaf block plus one tiny
+compute dispatch, nothing else) before that same frame's scene is drawn.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+import moderngl
+import numpy as np
+from imgui_bundle import imgui
+from numpy.typing import NDArray
+
+from ..gpu.renderer import LeafRenderer, Lighting
+from ..model.leaf import tessellate
+from ..model.params import LeafParams
+from ..resources import builtin_presets, preset_dir
+from . import hotreload
+from .chrome import FileBar, draw_error_window, draw_help, draw_status
+from .imgui_gl import ImguiRenderer
+from .input import ViewportInput
+from .orbit import OrbitCamera
+from .overlay import Overlay
+from .panel import ParamPanel
+from .handles import to_world
+from .state import ViewerState
+
+__all__ = ["Viewer", "PANEL_WIDTH", "BACKGROUND", "load_font"]
+
+PANEL_WIDTH = 390
+BACKGROUND = (0.115, 0.125, 0.14, 1.0)
+_FONTS = (
+    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/TTF/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu-sans-fonts/DejaVuSans.ttf",
+    "/Library/Fonts/DejaVuSans.ttf",
+    "C:/Windows/Fonts/DejaVuSans.ttf",
+)
+
+
+def load_font(size: float = 15.0) -> bool:
+    """Use DejaVu Sans (it has the combining macron of v̄, x̄s) if one is found; else imgui's
+    built-in font. Returns whether labels may use combining marks."""
+    candidates = [Path(p) for p in _FONTS]
+    try:  # matplotlib (an optional extra) ships DejaVu Sans
+        import matplotlib
+
+        candidates.append(Path(matplotlib.get_data_path()) / "fonts/ttf/DejaVuSans.ttf")
+    except ImportError:
+        pass
+    io = imgui.get_io()
+    for path in candidates:
+        if path.is_file():
+            try:
+                io.fonts.add_font_from_file_ttf(str(path), size)
+                return True
+            except Exception:  # a corrupt font file: try the next
+                continue
+    return False
+
+
+@lru_cache(maxsize=8)
+def _lighting(direction: tuple[float, float, float]) -> type[Lighting]:
+    """The renderer's lights with the key light moved to ``direction`` (towards the light)."""
+    return type("ViewerLighting", (Lighting,), {"key": (*direction, Lighting.key[3])})
+
+
+class Viewer:
+    """Scene + panel for one GL context. Creates (and on :meth:`release` destroys) its own imgui
+    context, so create at most one at a time.
+
+    Parameters
+    ----------
+    ctx:
+        The moderngl context (a glfw window's, or headless EGL).
+    state:
+        The leaf and history the panel and viewport edit.
+    dev:
+        Watch ``shaders/`` and hot-reload (``leafview view --dev``).
+    samples:
+        Multisampling of the scene (capped to the context's limit; 0 = off).
+    screenshot_dir:
+        Where P writes screenshots (default: the current directory).
+    """
+
+    def __init__(self, ctx: moderngl.Context, state: ViewerState, *, dev: bool = False, samples: int = 4,
+                 screenshot_dir: str | Path | None = None) -> None:
+        self.ctx, self.state = ctx, state
+        self.imgui_ctx = imgui.create_context()
+        imgui.get_io().set_ini_filename(None)  # never write imgui.ini into the user's directory
+        self.unicode_labels = load_font()
+        self.gui: ImguiRenderer | None = None
+        self.renderer: LeafRenderer | None = None
+        self.overlay: Overlay | None = None
+        try:
+            self.gui = ImguiRenderer(ctx)
+            self.renderer = LeafRenderer(ctx)
+            self.overlay = Overlay(ctx)
+        except BaseException:
+            self.release()
+            raise
+        self.panel = ParamPanel(state, unicode_labels=self.unicode_labels)
+        self.files = FileBar(state, builtin_presets())
+        self.camera = OrbitCamera(target=np.zeros(3))
+        self.input = ViewportInput(self)
+        self.samples = max(0, min(int(samples), int(ctx.max_samples)))
+        self.screenshot_dir = Path(screenshot_dir) if screenshot_dir is not None else Path.cwd()
+        self.watcher = hotreload.ShaderWatcher() if dev else None
+        self.shader_error: str | None = None
+        self.gl_errors: list[tuple[int, str]] = []
+        self.frame_index = 0
+        self.fps = 0.0
+        self.last_upload_bytes = 0
+        self.last_screenshot: Path | None = None
+        self.screenshot_requested = False
+        self.ground = (np.zeros(2), 0.0, 1.0)
+        self._uploaded = -1
+        self._framed_loads = -1
+        self._targets: list[Any] = []
+        self._target_key: tuple[int, int] | None = None
+        self.gl_renderer = str(ctx.info["GL_RENDERER"])
+
+    # -- geometry helpers -----------------------------------------------------------------------
+    @staticmethod
+    def layout(width: float) -> tuple[float, float]:
+        """(scene width, panel width) in window units for a window ``width`` wide."""
+        panel = min(float(PANEL_WIDTH), max(width * 0.5, 1.0))
+        return max(width - panel, 1.0), panel
+
+    def leaf_points(self) -> NDArray[np.float64]:
+        """World positions of a coarse tessellation (framing and the ground grid)."""
+        p = self.state.params
+        return to_world(p, tessellate(p, 17, 33).vertices)
+
+    def frame_leaf(self, aspect: float, *, reset: bool) -> None:
+        """F (keep direction) or R (home direction): fit the leaf, re-place the ground grid."""
+        pts = self.leaf_points()
+        (self.camera.reset if reset else self.camera.frame)(pts, aspect)
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        size = float(np.max(hi - lo))
+        self.ground = ((lo[:2] + hi[:2]) / 2, float(lo[2] - 0.03 * size), max(1.0, 1.5 * size))
+        self._uploaded = -1  # re-place the ground in the overlay
+
+    # -- one frame ------------------------------------------------------------------------------
+    def frame(self, window_size: tuple[int, int], fb_size: tuple[int, int] | None = None,
+              dt: float = 1 / 60) -> moderngl.Framebuffer | None:
+        """Run the UI and draw one frame; returns the framebuffer holding it (window size in
+        pixels), or None when the window is minimised (0 × 0): nothing is drawn then."""
+        w, h = int(window_size[0]), int(window_size[1])
+        fw, fh = (w, h) if fb_size is None else (int(fb_size[0]), int(fb_size[1]))
+        if min(w, h, fw, fh) <= 0:
+            return None
+        io = imgui.get_io()
+        io.display_size = imgui.ImVec2(w, h)
+        io.display_framebuffer_scale = imgui.ImVec2(fw / w, fh / h)
+        io.delta_time = float(min(max(dt, 1e-4), 1.0))
+        self._poll_shaders()
+        scene_w, _ = self.layout(w)
+        if self._framed_loads != self.state.loads:
+            self.frame_leaf(scene_w / h, reset=True)
+            self._framed_loads = self.state.loads
+
+        imgui.new_frame()
+        self.input.update(scene_w, h)
+        self._draw_ui(w, h, scene_w)
+        imgui.render()
+
+        self._upload()
+        fbo = self._target(fw, fh)
+        scene_px = max(1, int(round(scene_w * fw / w)))
+        self._draw_scene(scene_px, fh, scene_w, h)
+        if self.screenshot_requested:
+            self.screenshot_requested = False
+            self._write_screenshot(fbo, scene_px, fh)
+        fbo.use()
+        self.ctx.viewport = (0, 0, fw, fh)
+        assert self.gui is not None
+        self.gui.render(imgui.get_draw_data())
+        self._check_gl()
+        self.frame_index += 1
+        self.fps = 1.0 / io.delta_time if self.fps == 0 else 0.9 * self.fps + 0.1 / io.delta_time
+        return fbo
+
+    def _draw_ui(self, w: int, h: int, scene_w: float) -> None:
+        _, panel_w = self.layout(w)
+        imgui.set_next_window_pos(imgui.ImVec2(w - panel_w, 0), imgui.Cond_.always)
+        imgui.set_next_window_size(imgui.ImVec2(panel_w, h), imgui.Cond_.always)
+        flags = (imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse
+                 | imgui.WindowFlags_.no_saved_settings)
+        imgui.begin(f"leafview: {self.state.title}###panel", None, flags)
+        imgui.push_item_width(-150)
+        self.files.draw()
+        imgui.separator()
+        self.panel.draw_edits()
+        self.panel.draw_groups()
+        self.panel.draw_view()
+        imgui.pop_item_width()
+        imgui.end()
+        self.files.draw_confirm()
+        view = self.state.view
+        nu, nv = view.grid
+        status = (f"{self.fps:5.1f} fps   {2 * (nu - 1) * (nv - 1):,} triangles   {self.gl_renderer}"
+                  f"   H: keys")
+        draw_status(imgui.ImVec2(8, h - 8), status)
+        if view.show_help:
+            draw_help(imgui.ImVec2(scene_w / 2, h / 2))
+        if self.shader_error and draw_error_window("Shader error (--dev)", self.shader_error,
+                                                   imgui.ImVec2(10, 10), max(200.0, min(720.0, scene_w - 20))):
+            self.shader_error = None
+
+    def _upload(self) -> None:
+        """Upload the leaf if it changed since the last frame (uniform block only)."""
+        state = self.state
+        if state.revision == self._uploaded:
+            self.last_upload_bytes = 0
+            return
+        assert self.renderer is not None and self.overlay is not None
+        before = self.renderer.uploads
+        self.renderer.set_leaf(state.params)
+        self.last_upload_bytes = self.renderer.uploads - before
+        center, z, half = self.ground
+        self.overlay.update(state.params, state.revision, center, z, half)
+        self._uploaded = state.revision
+
+    def _draw_scene(self, px_w: int, px_h: int, scene_w: float, h: int) -> None:
+        assert self.renderer is not None and self.overlay is not None
+        view = self.state.view
+        msaa, fbo = self._targets[0], self._targets[1]
+        draw = msaa if msaa is not None else fbo
+        draw.use()
+        self.ctx.scissor = None
+        draw.clear(*BACKGROUND, depth=1.0)
+        self.ctx.viewport = (0, 0, px_w, px_h)
+        cam = self.camera.camera(int(round(scene_w)), h)
+        light = _lighting(view.light_direction())
+        self.renderer.set_camera(cam, srgb=True, lighting=light)
+        self.renderer.draw(grid=view.grid, wireframe=view.wireframe)
+        view_proj = cam.proj @ cam.view
+        if view.show_ground:
+            self.overlay.draw_ground(view_proj)
+        if view.show_controls:
+            self.overlay.draw_controls(view_proj, self.input.hot)
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        if msaa is not None:
+            self.ctx.copy_framebuffer(fbo, msaa)
+
+    # -- framebuffers -----------------------------------------------------------------------------
+    def _target(self, w: int, h: int) -> moderngl.Framebuffer:
+        """(Re)create the offscreen targets for a frame of w × h pixels."""
+        if self._target_key != (w, h):
+            self._release_targets()
+            color = self.ctx.renderbuffer((w, h), 4)
+            depth = self.ctx.depth_renderbuffer((w, h))
+            fbo = self.ctx.framebuffer([color], depth)
+            msaa = None
+            objs = [fbo, color, depth]
+            if self.samples:
+                mcolor = self.ctx.renderbuffer((w, h), 4, samples=self.samples)
+                mdepth = self.ctx.depth_renderbuffer((w, h), samples=self.samples)
+                msaa = self.ctx.framebuffer([mcolor], mdepth)
+                objs += [msaa, mcolor, mdepth]
+            self._targets = [msaa, fbo, *objs]
+            self._target_key = (w, h)
+        return self._targets[1]
+
+    def _release_targets(self) -> None:
+        if self._targets:
+            self.ctx.detect_framebuffer(0).use()
+            for obj in self._targets[2:]:
+                obj.release()
+        self._targets, self._target_key = [], None
+
+    def read_frame(self, viewport: tuple[int, int, int, int] | None = None) -> NDArray[np.uint8]:
+        """The last frame (or a region of it) as (h, w, 4) uint8 sRGB, row 0 at the top, opaque."""
+        if self._target_key is None:
+            raise RuntimeError("no frame has been drawn yet")
+        fbo = self._targets[1]
+        x, y, w, h = viewport if viewport is not None else (0, 0, *self._target_key)
+        raw = fbo.read(viewport=(x, y, w, h), components=4, alignment=1)
+        img = np.frombuffer(raw, np.uint8).reshape(h, w, 4)[::-1].copy()
+        img[..., 3] = 255
+        return img
+
+    # -- screenshots, shaders, errors -----------------------------------------------------------
+    def _write_screenshot(self, fbo: moderngl.Framebuffer, w: int, h: int) -> None:
+        from ..imaging import ImageWriteError, write_image
+
+        img = self.read_frame((0, 0, w, h))
+        stem = (self.state.path.stem if self.state.path else self.state.params.name) or "leaf"
+        base = self.screenshot_dir / f"leafview-{stem}-{time.strftime('%Y%m%d-%H%M%S')}"
+        path, n = base.with_suffix(".png"), 1
+        while path.exists():
+            path, n = Path(f"{base}-{n}.png"), n + 1
+        try:
+            write_image(path, img, params=self.state.params, description="leafview viewer screenshot")
+        except (ImageWriteError, OSError) as exc:
+            self.state.error = f"screenshot failed: {exc}"
+            return
+        self.last_screenshot = path
+        self.state.message = f"wrote {path}"
+        print(f"leafview view: wrote {path}", flush=True)
+
+    def _poll_shaders(self) -> None:
+        if self.watcher is None or not self.watcher.changed():
+            return
+        self.reload_shaders()
+
+    def reload_shaders(self) -> bool:
+        """Compile the current shader files; swap them in only if all compile."""
+        assert self.renderer is not None
+        try:
+            hotreload.compile_check(self.ctx)
+            renderer = LeafRenderer(self.ctx)
+            overlay = Overlay(self.ctx)
+        except Exception as exc:  # ShaderError, a missing include, a driver message
+            self.shader_error = hotreload.describe(exc)
+            print(f"leafview view: shader reload failed, keeping the previous shaders:\n{exc}",
+                  file=sys.stderr, flush=True)
+            return False
+        self.renderer.release()
+        assert self.overlay is not None
+        self.overlay.release()
+        self.renderer, self.overlay = renderer, overlay
+        self._uploaded = -1
+        self.shader_error = None
+        self.state.message = "shaders reloaded"
+        return True
+
+    def _check_gl(self) -> None:
+        err = self.ctx.error
+        if err != "GL_NO_ERROR":
+            self.gl_errors.append((self.frame_index, err))
+            if len(self.gl_errors) <= 3:
+                print(f"leafview view: OpenGL error in frame {self.frame_index}: {err}", file=sys.stderr)
+
+    def release(self) -> None:
+        """Release every GL object and the imgui context (idempotent)."""
+        self._release_targets()
+        for name in ("gui", "renderer", "overlay"):
+            obj = getattr(self, name, None)
+            if obj is not None:
+                obj.release()
+                setattr(self, name, None)
+        if getattr(self, "imgui_ctx", None) is not None:
+            imgui.destroy_context(self.imgui_ctx)
+            self.imgui_ctx = None
+
+    def __enter__(self) -> "Viewer":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def open_state(params: LeafParams, path: Path | None) -> ViewerState:
+    """A :class:`ViewerState` for a leaf, with the built-in preset folder marked read-only."""
+    return ViewerState(params, path, builtin_dir=preset_dir())
