@@ -120,7 +120,7 @@ def contact_sheet(images: Sequence[NDArray[np.uint8]], labels: Sequence[str], *,
     n = len(images)
     cols = columns or min(n, max(1, int(np.ceil(np.sqrt(n * 1.6)))))
     rows = (n + cols - 1) // cols
-    font = max(10, tw // 10)
+    font = max(10, min(tw, 2 * th) // 12)
     label_h = int(font * 1.7)
     canvas = np.empty((rows * (th + label_h), cols * tw, 3), dtype=np.float32)
     canvas[:] = background

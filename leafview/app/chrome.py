@@ -79,29 +79,26 @@ class FileBar:
         if self.state.can_save:
             self.state.save()
         else:
-            self.show_save_as = True
+            self.show_save_as, self.show_open = True, False
             if not self.save_path:
-                stem = self.state.path.stem if self.state.path else (self.state.params.name or "leaf")
-                self.save_path = str(Path.cwd() / f"{stem}.toml")
+                self.save_path = self._suggested_path()
+
+    def _suggested_path(self) -> str:
+        """A save-as name in the current directory (never inside the built-in presets)."""
+        stem = self.state.path.stem if self.state.path else (self.state.params.name or "leaf")
+        return str(Path.cwd() / f"{stem}.toml")
 
     # -- drawing ----------------------------------------------------------------------------------
     def draw(self) -> None:
         state = self.state
         names = list(self.presets)
         current = state.path.stem if state.path is not None and state.is_builtin() else ""
-        imgui.set_next_item_width(-70)
-        if imgui.begin_combo("preset##file", current or "(choose)"):
+        if imgui.begin_combo("preset##file", current or "(choose a built-in preset)"):
             for name in names:
                 selected = name == current
                 if imgui.selectable(name, selected)[0]:
                     self.request_open(self.presets[name])
             imgui.end_combo()
-        imgui.same_line()
-        if imgui.button("Reset##file"):
-            state.reset_to_preset()
-        if imgui.is_item_hovered():
-            imgui.set_tooltip("back to the leaf as it was opened (undoable)")
-
         imgui.begin_disabled(not state.can_undo)
         if imgui.button("Undo##file"):
             state.undo()
@@ -121,8 +118,12 @@ class FileBar:
         if imgui.button("Save as…##file"):
             self.show_save_as, self.show_open = not self.show_save_as, False
             if self.show_save_as and not self.save_path:
-                self.save()
-                self.show_save_as = True
+                self.save_path = self._suggested_path()
+        imgui.same_line()
+        if imgui.button("Reset##file"):
+            state.reset_to_preset()
+        if imgui.is_item_hovered():
+            imgui.set_tooltip("back to the leaf as it was opened (undoable)")
 
         if self.show_open:
             imgui.set_next_item_width(-60)
@@ -168,8 +169,7 @@ class FileBar:
             imgui.text_colored(ERROR_COLOR, state.error)
         if not state.can_save:
             imgui.set_next_item_width(360)
-            _, self.save_path = imgui.input_text("save as##confirm-path", self.save_path or
-                                                 str(Path.cwd() / f"{state.params.name or 'leaf'}.toml"))
+            _, self.save_path = imgui.input_text("save as##confirm-path", self.save_path or self._suggested_path())
         if imgui.button("Save##confirm"):
             ok = state.save() if state.can_save else state.save_as(self.save_path.strip())
             if ok:

@@ -46,8 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="after the last frame, write the whole window (scene and panel) as PNG/TIFF")
     parser.add_argument("--dev", action="store_true",
                         help="hot-reload shaders/ when the files change (errors shown, old shaders kept)")
-    parser.add_argument("--samples", type=int, choices=(0, 2, 4, 8), default=4,
-                        help="multisampling of the scene (default 4)")
+    parser.add_argument("--samples", type=int, choices=(0, 2, 4, 8), default=None,
+                        help="multisampling of the scene (default 4; 0 on software renderers such as llvmpipe)")
 
 
 def view_main(args: argparse.Namespace) -> int:

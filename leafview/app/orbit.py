@@ -93,7 +93,7 @@ class OrbitCamera:
         self.radius = max(float(np.linalg.norm(p - self.target, axis=1).max()), 1e-3)
         fov_y = math.radians(FOV_DEG)
         fov_x = 2 * math.atan(math.tan(fov_y / 2) * max(aspect, 1e-3))
-        self.distance = self.radius / math.sin(min(fov_x, fov_y) / 2) * 1.05
+        self.distance = self.radius / math.sin(min(fov_x, fov_y) / 2) * 1.15
 
     def reset(self, points: ArrayLike, aspect: float = 1.0) -> None:
         """Back to the home (three-quarter) direction, framed on ``points``."""

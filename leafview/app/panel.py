@@ -161,7 +161,7 @@ class ParamPanel:
         sh = self.state.params.shape
         self._relative_slider("width", "width ×", 0.25, 2.5, "×%.2f", scale_width)
         self._relative_slider("skew", "asymmetry (skew axis)", -0.3, 0.3, "%+.3f", skew_axis)
-        self._absolute_slider("axis", "axis curvature (a1, a2 z)", (sh.a1[2] + sh.a2[2]) / 2, curve_axis)
+        self._absolute_slider("axis", "axis curvature", (sh.a1[2] + sh.a2[2]) / 2, curve_axis)
         for curve, zs in (("S", [r[2] for r in sh.silhouette]), ("F", sh.zf), ("G", sh.zg)):
             self._absolute_slider(f"curve{curve}", f"{curve} curvature (z̄{curve.lower()})"
                                   if self.unicode_labels else f"{curve} curvature (z{curve.lower()})",

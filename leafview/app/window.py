@@ -39,7 +39,7 @@ class ViewerWindow:
     """
 
     def __init__(self, state: ViewerState, size: tuple[int, int] = (1280, 800), *, dev: bool = False,
-                 samples: int = 4, title: str = "leafview") -> None:
+                 samples: int | None = None, title: str = "leafview") -> None:
         self._errors: list[str] = []
         self.window: Any = None
         self.ctx: moderngl.Context | None = None
