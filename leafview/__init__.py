@@ -15,7 +15,7 @@ __version__ = "0.1.0"
 
 __all__ = ["LeafParams", "Shape", "Jitter", "Material", "Transform", "ParamError", "FieldSpec",
            "field_specs", "evaluate", "normals", "partials", "tessellate", "Mesh", "render", "gpu",
-           "edits", "__version__"]
+           "edits", "beam", "fbm_noise", "__version__"]
 
 
 def __getattr__(name: str) -> Any:
@@ -27,4 +27,8 @@ def __getattr__(name: str) -> Any:
         return importlib.import_module(".gpu", __name__).render
     if name == "edits":
         return importlib.import_module(".model.edits", __name__)
+    if name == "beam":
+        return importlib.import_module(".beam", __name__)
+    if name == "fbm_noise":
+        return importlib.import_module(".model.fbm", __name__).fbm_noise
     raise AttributeError(f"module 'leafview' has no attribute {name!r}")

@@ -51,6 +51,7 @@ class FileBar:
         self._pending: Callable[[], None] | None = None
         self._pending_what = ""
         self._want_popup = False
+        self._opened_at = 0
 
     # -- guarded actions --------------------------------------------------------------------------
     def request(self, what: str, action: Callable[[], None]) -> None:
@@ -157,6 +158,7 @@ class FileBar:
         if self._want_popup:
             imgui.open_popup(CONFIRM_POPUP)
             self._want_popup = False
+            self._opened_at = imgui.get_frame_count()  # the key that asked must not also answer
         center = imgui.get_main_viewport().get_center()
         imgui.set_next_window_pos(center, imgui.Cond_.appearing, imgui.ImVec2(0.5, 0.5))
         opened, _ = imgui.begin_popup_modal(CONFIRM_POPUP, None, imgui.WindowFlags_.always_auto_resize)
@@ -180,7 +182,8 @@ class FileBar:
             self._finish(run=True)
             imgui.close_current_popup()
         imgui.same_line()
-        if imgui.button("Cancel##confirm") or imgui.is_key_pressed(imgui.Key.escape, False):
+        escape = imgui.is_key_pressed(imgui.Key.escape, False) and imgui.get_frame_count() > self._opened_at
+        if imgui.button("Cancel##confirm") or escape:
             self._finish(run=False)
             imgui.close_current_popup()
         imgui.end_popup()
