@@ -19,6 +19,8 @@ NUMERIC_KEYS = (
     "baked_vs_param_bytes", "baked_bytes_per_leaf", "param_bytes_per_leaf",
     "leaves_per_s_220tri", "vs_paper_550", "triangles_per_leaf", "cpu_count",
     "thumbnail_count", "matplotlib_thumbnail_count", "scene_leaves",
+    "thumbnails_per_s_single", "thumbnails_per_s_three_quarter", "record_bytes_per_leaf",
+    "baked_vs_record_bytes", "ripple_overhead", "ripple_pass_ms", "ripple_pass_ms_1000",
 )
 
 

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ..gpu.shaders import build_program
-from ..model.bezier import evaluate_curve
+from ..model.bezier import bernstein
 from ..model.leaf import control_polygons
 from ..model.params import LeafParams
 from .handles import HANDLE_NAMES, handle_points, to_world
@@ -43,14 +43,17 @@ def _segments(points: NDArray[np.float64]) -> NDArray[np.float64]:
 def control_lines(params: LeafParams) -> NDArray:
     """Line vertices (world space) of every control polygon (dim) and curve (bright)."""
     polys = control_polygons(params)
+    m = params.transform.matrix()
     t = np.linspace(0.0, 1.0, _CURVE_SAMPLES)
+    basis = {n: bernstein(n, t) for n in (3, 4)}
     chunks = []
     for name, ctrl in polys.items():
-        rgb = CURVE_COLORS[name[0]]
-        for pts, alpha in ((ctrl, 0.55), (evaluate_curve(ctrl, t), 1.0)):
-            seg = _segments(to_world(params, pts))
-            v = np.zeros(len(seg), _VERTEX)
-            v["pos"], v["color"] = seg, (*rgb, alpha)
+        curve = basis[len(ctrl) - 1] @ ctrl
+        for pts, alpha in ((ctrl, 0.55), (curve, 1.0)):
+            seg = _segments(pts)
+            v = np.empty(len(seg), _VERTEX)
+            v["pos"] = seg @ m[:3, :3].T + m[:3, 3]
+            v["color"] = (*CURVE_COLORS[name[0]], alpha)
             chunks.append(v)
     return np.concatenate(chunks)
 
