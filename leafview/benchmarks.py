@@ -45,6 +45,7 @@ GOALS = {
     "param_vs_baked_speed": 0.9,
     "baked_vs_param_bytes": 250.0,
     "ripple_overhead": 1.3,  # at most: lower is better
+    "edit_latency_ratio": 1.2,  # at most: viewer frame carrying an edit ÷ steady frame
     "vs_paper_550": 20.0,
 }
 
@@ -194,7 +195,9 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
     ``thumbnail_speedup``, ``param_vs_baked_speed`` (+ ``instanced_leaves_per_s``,
     ``baked_leaves_per_s``, ``param_vs_baked_mean_abs_diff``), ``baked_vs_param_bytes`` (+
     ``baked_bytes_per_leaf``, ``param_bytes_per_leaf``), ``leaves_per_s_220tri``,
-    ``vs_paper_550``, and the configuration: counts, grids, versions, ``cpu_count``.
+    ``vs_paper_550``, ``edit_latency_ratio`` (+ ``viewer_frame_ms``, ``viewer_edit_frame_ms``,
+    ``viewer_edit_upload_bytes``; see :mod:`leafview.app.latency`), and the configuration:
+    counts, grids, versions, ``cpu_count``.
     """
     import matplotlib
     import moderngl
@@ -205,7 +208,7 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
     from .gpu.renderer import LeafRenderer
 
     cfg = _CONFIG[bool(quick)]
-    progress = _Progress(6)
+    progress = _Progress(7)
     res: dict[str, Any] = {}
     own_ctx = ctx is None
     if own_ctx:
@@ -282,6 +285,12 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
         progress.step("ripples")
         res.update(_ripples(ctx, cfg["scene_repeats"]))
 
+        # -- the viewer: a frame that carries an edit ÷ a steady frame (leafview.app.latency) ----
+        progress.step("viewer edit latency")
+        from .app.latency import measure_edit_latency
+
+        res.update(measure_edit_latency(ctx, pairs=5 if quick else 30, warmup=2 if quick else 5))
+
         # -- against the paper: the instanced path at ~220 triangles per leaf (same run) --------
         res["leaves_per_s_220tri"] = res["instanced_leaves_per_s"]
         res["triangles_per_leaf"] = tris
@@ -312,7 +321,7 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
     return res
 
 
-_AT_MOST = {"ripple_overhead"}
+_AT_MOST = {"ripple_overhead", "edit_latency_ratio"}
 
 
 def _goal(key: str, res: dict[str, Any]) -> str:
@@ -420,6 +429,10 @@ def format_table(res: dict[str, Any]) -> str:
         ("ripple pass re-run", f"{res['ripple_pass_ms']:.2f} ms",
          f"one signal of {res['ripple_samples']} samples; 1000 signals in one dispatch: "
          f"{res['ripple_pass_ms_1000']:.1f} ms"),
+        ("edit latency ratio", f"{res['edit_latency_ratio']:.3f}",
+         f"{_goal('edit_latency_ratio', res)}; viewer {res['viewer_size'][0]}×{res['viewer_size'][1]}: "
+         f"edit → read-back frame {res['viewer_edit_frame_ms']:.1f} ms ÷ steady {res['viewer_frame_ms']:.1f} ms, "
+         f"{res['viewer_edit_upload_bytes']} B uploaded"),
         (f"leaves/s at {res['triangles_per_leaf']} tris", num(res["leaves_per_s_220tri"]),
          f"instanced path, grid {sg[0]}×{sg[1]}"),
         ("vs paper (550 leaves/s)", f"{num(res['vs_paper_550'])}×", _goal("vs_paper_550", res)),

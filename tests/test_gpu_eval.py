@@ -160,3 +160,11 @@ def test_single_leaf_jitter_after_a_multi_seed_batch(gl, presets):
     one = presets["ovate"].replace(jitter=Jitter(enabled=True, seed=77, amplitude=0.05))
     u, v = np.ones(64), np.linspace(0.05, 0.95, 64)
     np.testing.assert_allclose(leafview.gpu.evaluate(one, u, v), leafview.evaluate(one, u, v), atol=TOL)
+
+
+def test_parameter_bytes_exclude_exactly_the_derived_members():
+    names = [name for name, _, _ in LEAF_BLOCK.members]
+    assert set(LEAF_BLOCK.derived) <= set(names)
+    derived = sum(LEAF_BLOCK.dtype.fields[n][0].itemsize for n in LEAF_BLOCK.derived)
+    assert LEAF_BLOCK.parameter_nbytes + derived == LEAF_BLOCK.nbytes
+    assert LEAF_BLOCK.nbytes <= 1024  # one leaf's uniform block stays well under 1 KiB
