@@ -48,4 +48,10 @@ vec3 quartic_dt(vec3 p0, vec3 p1, vec3 p2, vec3 p3, vec3 p4, float t) {
     return 4.0 * cubic(p1 - p0, p2 - p1, p3 - p2, p4 - p3, t);
 }
 
+// eq. 2: the axis tangent rotated +90 degrees in the xy plane, z dropped, normalised
+vec3 axis_normal(vec3 d) {
+    vec3 m = vec3(-d.y, d.x, 0.0);
+    return m / length(m);
+}
+
 #endif

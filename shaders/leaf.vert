@@ -5,14 +5,13 @@
 // leafview.gpu.evaluate, so what is tested is what is drawn.
 #include "generated/leaf_block.glsl"
 #include "generated/frame_block.glsl"
-#include "leaf_eval.glsl"
-
 #ifdef LEAF_INSTANCED
 layout(std430, binding = 2) readonly buffer Leaves { LeafData leaves[]; };
-#define LEAF_DATA leaves[gl_InstanceID]
+#define LEAF leaves[gl_InstanceID]
 #else
-#define LEAF_DATA leaf
+#define LEAF leaf
 #endif
+#include "leaf_eval.glsl"
 
 // jitter tables, one row per seed (moderngl has no 1D textures; a 2D texture of 1D rows)
 layout(binding = 0) uniform sampler2D jitter_table;
@@ -28,16 +27,15 @@ flat out vec4 v_front;      // rgb, translucency
 flat out vec3 v_back;
 
 void main() {
-    LeafData d = LEAF_DATA;
-    LeafEval e = leaf_eval(d, jitter_table, in_uv);
+    LeafEval e = leaf_eval(jitter_table, in_uv);
     vec3 n = leaf_normal(e, in_uv.y);
     v_object = e.L;
     v_object_normal = n;
-    vec4 world = d.model * vec4(e.L, 1.0);
+    vec4 world = LEAF.model * vec4(e.L, 1.0);
     v_world = world.xyz;
-    v_normal = normalize(mat3(d.model) * n);  // rotation and uniform scale only
+    v_normal = normalize(mat3(LEAF.model) * n);  // rotation and uniform scale only
     v_uv = in_uv;
-    v_front = d.front;
-    v_back = d.back.rgb;
+    v_front = LEAF.front;
+    v_back = LEAF.back.rgb;
     gl_Position = frame.proj * frame.view * world;
 }

@@ -1,5 +1,9 @@
 // The leaf surface L_Ω(u, v) of seed 004 sec. 3 (eqs 2-6), its partial derivatives and normal,
-// plus the jittered silhouette of sec. 6. Conventions and the numpy reference:
+// plus the jittered silhouette of sec. 6.
+// The including shader defines LEAF as the LeafData to read (the Leaf uniform block or one row of
+// the Leaves storage buffer). Fields are read through it where they are used, never copied as a
+// whole struct: a copy makes the compiler load every field (and on llvmpipe each storage-buffer
+// load is a per-vertex gather). Conventions and the numpy reference:
 // leafview/model/leaf.py (a test compares positions read back from this code with it).
 #ifndef LEAFVIEW_LEAF_EVAL_GLSL
 #define LEAFVIEW_LEAF_EVAL_GLSL
@@ -16,14 +20,7 @@ struct LeafEval {
     vec3 Luv;  // d2L/dudv
 };
 
-const vec3 LEAF_BASE = vec3(0.0);
-const vec3 LEAF_APEX = vec3(0.0, 1.0, 0.0);
 
-// eq. 2: the axis tangent rotated +90 degrees in the xy plane, z dropped, normalised
-vec3 axis_normal(vec3 d) {
-    vec3 m = vec3(-d.y, d.x, 0.0);
-    return m / length(m);
-}
 
 // tau(v) = 1 - (2v - 1)^4 (x) and its derivative (y): zero at base and apex
 vec2 tip_taper(float v) {
@@ -35,14 +32,14 @@ vec2 tip_taper(float v) {
 // Rippled margin (seed 002 eq. 5): D = tau(v) r(v) c(|u|) z, r = P [lambda + (1 - lambda) N(k veins v
 // + theta)], c(s) = s^2 (3 - s) / 2 the small-deflection shape of a tip-loaded cantilever (the
 // secondary vein from the midrib). numpy reference: leafview/model/leaf.py, _add_ripple.
-void add_ripple(LeafData d, float sigma, float s, float v, inout LeafEval e) {
-    vec4 rp = sigma > 0.0 ? d.ripple_l : d.ripple_r;  // P, lambda, k, theta
-    int base = int(d.deform.w) * RIPPLE_SAMPLES;
-    float t = rp.z * d.deform.z * v + rp.w;
+void add_ripple(float sigma, float s, float v, inout LeafEval e) {
+    vec4 rp = sigma > 0.0 ? LEAF.ripple_l : LEAF.ripple_r;  // P, lambda, k, theta
+    int base = int(LEAF.deform.w) * RIPPLE_SAMPLES;
+    float t = rp.z * LEAF.deform.z * v + rp.w;
     vec2 n;
     FBM_SAMPLE_PERIODIC(signals, base, RIPPLE_SAMPLES, t, n);
     float r = rp.x * (rp.y + (1.0 - rp.y) * n.x);
-    float dr = rp.x * (1.0 - rp.y) * n.y * rp.z * d.deform.z;
+    float dr = rp.x * (1.0 - rp.y) * n.y * rp.z * LEAF.deform.z;
     vec2 tau = tip_taper(v);
     float c = 0.5 * s * s * (3.0 - s);
     float dc = 3.0 * s - 1.5 * s * s;
@@ -63,28 +60,28 @@ mat3 axis_rotation(vec3 a, float t) {
     return c * mat3(1.0) + s * cross_matrix(a) + (1.0 - c) * outerProduct(a, a);
 }
 
-vec4 bend_sample(LeafData d, int i) {
-    if (i < 0) return 2.0 * d.bend[0] - d.bend[1];
-    if (i >= BEND_SAMPLES) return 2.0 * d.bend[BEND_SAMPLES - 1] - d.bend[BEND_SAMPLES - 2];
-    return d.bend[i];
+vec4 bend_sample(int i) {
+    if (i < 0) return 2.0 * LEAF.bend[0] - LEAF.bend[1];
+    if (i >= BEND_SAMPLES) return 2.0 * LEAF.bend[BEND_SAMPLES - 1] - LEAF.bend[BEND_SAMPLES - 2];
+    return LEAF.bend[i];
 }
 
 // Midrib bend and twist (seed 002 secs 4, 5.2.2): p' = A + Delta(v) + R(v) (p - A), R = R_N(Phi(v))
 // R_y(alpha v), Delta and Phi Catmull-Rom through the host's bend samples. numpy reference:
 // leafview/model/leaf.py, _bend, and leafview/model/beam.py, sample_clamped.
-void apply_bend(LeafData d, float v, vec3 Av, vec3 dAv, inout LeafEval e) {
+void apply_bend(float v, vec3 Av, vec3 dAv, inout LeafEval e) {
     float t = clamp(v, 0.0, 1.0) * float(BEND_SAMPLES - 1);
     int i = min(int(floor(t)), BEND_SAMPLES - 2);
     float x = t - float(i);
-    vec4 p0 = bend_sample(d, i - 1), p1 = bend_sample(d, i), p2 = bend_sample(d, i + 1), p3 = bend_sample(d, i + 2);
+    vec4 p0 = bend_sample(i - 1), p1 = bend_sample(i), p2 = bend_sample(i + 1), p3 = bend_sample(i + 2);
     vec4 c1 = 0.5 * (p2 - p0);
     vec4 c2 = p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3;
     vec4 c3 = 0.5 * (p3 - p0) + 1.5 * (p1 - p2);
     vec4 val = ((c3 * x + c2) * x + c1) * x + p1;                        // Delta.xyz, Phi
     vec4 slope = ((3.0 * c3 * x + 2.0 * c2) * x + c1) * float(BEND_SAMPLES - 1);
 
-    vec3 axis = d.bend_axis.xyz;
-    float alpha = d.bend_axis.w;
+    vec3 axis = LEAF.bend_axis.xyz;
+    float alpha = LEAF.bend_axis.w;
     const vec3 Y = vec3(0.0, 1.0, 0.0);
     mat3 rn = axis_rotation(axis, val.w);
     mat3 ry = axis_rotation(Y, alpha * v);
@@ -108,16 +105,16 @@ void apply_bend(LeafData d, float v, vec3 Av, vec3 dAv, inout LeafEval e) {
 // The cubic Bernstein basis has linear precision, sum_k (k/3) B_k(s) = s, so eq. 6 becomes
 //   L(u, v) = B_0(s) A(v) + (1 - B_0(s)) P(v) + u Q(v) + (B_1 zF + B_2 zG + B_3 zS) z
 // two vector quartics per vertex instead of six.
-LeafEval leaf_eval(LeafData d, sampler2D jitter_tex, vec2 uv) {
+LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
     float u = uv.x, v = uv.y;
     float sigma = u >= 0.0 ? 1.0 : -1.0;
     float s = abs(u);
-    vec3 a1 = d.a1.xyz, a2 = d.a2.xyz;
+    vec3 a1 = LEAF.a1.xyz, a2 = LEAF.a2.xyz;
 
     // the axis points A(v̄_i) and scaled in-plane normals x̄s_i n(v̄_i) of eqs 3-4: per-leaf
     // constants, filled in by leaf_prepare.comp before any draw
-    vec4 k1 = d.axis[0], k2 = d.axis[1], k3 = d.axis[2];
-    vec4 h1 = d.heights[0], h2 = d.heights[1], h3 = d.heights[2];
+    vec4 k1 = LEAF.axis[0], k2 = LEAF.axis[1], k3 = LEAF.axis[2];
+    vec4 h1 = LEAF.heights[0], h2 = LEAF.heights[1], h3 = LEAF.heights[2];
     vec3 P1 = k1.xyz, P2 = k2.xyz, P3 = k3.xyz;
     vec3 Q1 = vec3(k1.w, h1.w, 0.0), Q2 = vec3(k2.w, h2.w, 0.0), Q3 = vec3(k3.w, h3.w, 0.0);
     vec3 zf = vec3(h1.x, h2.x, h3.x), zg = vec3(h1.y, h2.y, h3.y), zs = vec3(h1.z, h2.z, h3.z);
@@ -151,18 +148,18 @@ LeafEval leaf_eval(LeafData d, sampler2D jitter_tex, vec2 uv) {
     e.Luv = sigma * db.x * (dAv - dPv) + dQv + vec3(0.0, 0.0, sigma * dot(db.yzw, dz));
 
     // jittered silhouette (sec. 6): D = amp j(v) s^2 tau(v) sigma n(v)
-    float amp = d.jitter.x;
+    float amp = LEAF.jitter.x;
     if (amp > 0.0) {
-        int size = int(d.jitter.z);
-        float t = v * d.jitter.y;
+        int size = int(LEAF.jitter.z);
+        float t = v * LEAF.jitter.y;
         float fi = floor(t);
         float fr = t - fi;
         int i0 = int(mod(fi, float(size)));
         int i1 = (i0 + 1) % size;
-        float j0 = texelFetch(jitter_tex, ivec2(i0, int(d.jitter.w)), 0).r;
-        float j1 = texelFetch(jitter_tex, ivec2(i1, int(d.jitter.w)), 0).r;
+        float j0 = texelFetch(jitter_tex, ivec2(i0, int(LEAF.jitter.w)), 0).r;
+        float j1 = texelFetch(jitter_tex, ivec2(i1, int(LEAF.jitter.w)), 0).r;
         float j = j0 + (j1 - j0) * fr;
-        float dj = (j1 - j0) * d.jitter.y;
+        float dj = (j1 - j0) * LEAF.jitter.y;
         vec2 taper = tip_taper(v);
         float tau = taper.x, dtau = taper.y;
 
@@ -180,11 +177,11 @@ LeafEval leaf_eval(LeafData d, sampler2D jitter_tex, vec2 uv) {
         e.Lv += (amp * s * s * sigma) * dg;
         e.Luv += (amp * 2.0 * s) * dg;
     }
-    if (d.deform.x > 0.0) {
-        add_ripple(d, sigma, s, v, e);
+    if (LEAF.deform.x > 0.0) {
+        add_ripple(sigma, s, v, e);
     }
-    if (d.deform.y > 0.0) {
-        apply_bend(d, v, Av, dAv, e);
+    if (LEAF.deform.y > 0.0) {
+        apply_bend(v, Av, dAv, e);
     }
     return e;
 }

@@ -5,7 +5,7 @@
 // per vertex (see layout.py). numpy reference: leafview/model/leaf.py, axis_frames().
 layout(local_size_x = 64) in;
 #include "generated/leaf_block.glsl"
-#include "leaf_eval.glsl"
+#include "bezier.glsl"
 
 layout(std430, binding = 2) buffer Leaves { LeafData leaves[]; };
 uniform uint count;

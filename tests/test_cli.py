@@ -126,13 +126,15 @@ def test_bad_arguments_exit_2(tmp_path, monkeypatch, capsys, args, words):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_argparse_errors_exit_2(capsys):
+def test_argparse_errors_exit_2(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit) as info:
         main(["render", "ovate", "-o", "x.png", "--size", "huge"])
     assert info.value.code == 2
     with pytest.raises(SystemExit) as info:
         main(["render", "ovate", "-o", "x.png", "--view", "sideways"])
     assert info.value.code == 2
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_presets_command_lists_builtins(capsys):

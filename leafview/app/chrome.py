@@ -14,7 +14,7 @@ from imgui_bundle import imgui
 
 from .state import ViewerState
 
-__all__ = ["FileBar", "KEYS", "draw_help", "draw_status", "draw_error_window", "ERROR_COLOR"]
+__all__ = ["FileBar", "KEYS", "draw_help", "draw_status", "draw_error_window", "ERROR_COLOR", "load_font"]
 
 ERROR_COLOR = imgui.ImVec4(1.0, 0.45, 0.4, 1.0)
 CONFIRM_POPUP = "Unsaved changes##confirm"
@@ -52,6 +52,14 @@ class FileBar:
         self._pending_what = ""
         self._want_popup = False
         self._opened_at = 0
+        self.rects: dict[str, tuple[float, float, float, float]] = {}  # where each button was drawn
+
+    def _button(self, label: str) -> bool:
+        """``imgui.button`` that records its rectangle under its label."""
+        pressed = imgui.button(label)
+        lo, hi = imgui.get_item_rect_min(), imgui.get_item_rect_max()
+        self.rects[label] = (lo.x, lo.y, hi.x, hi.y)
+        return pressed
 
     # -- guarded actions --------------------------------------------------------------------------
     def request(self, what: str, action: Callable[[], None]) -> None:
@@ -101,27 +109,27 @@ class FileBar:
                     self.request_open(self.presets[name])
             imgui.end_combo()
         imgui.begin_disabled(not state.can_undo)
-        if imgui.button("Undo##file"):
+        if self._button("Undo##file"):
             state.undo()
         imgui.end_disabled()
         imgui.same_line()
         imgui.begin_disabled(not state.can_redo)
-        if imgui.button("Redo##file"):
+        if self._button("Redo##file"):
             state.redo()
         imgui.end_disabled()
         imgui.same_line()
-        if imgui.button("Open…##file"):
+        if self._button("Open…##file"):
             self.show_open, self.show_save_as = not self.show_open, False
         imgui.same_line()
-        if imgui.button("Save##file"):
+        if self._button("Save##file"):
             self.save()
         imgui.same_line()
-        if imgui.button("Save as…##file"):
+        if self._button("Save as…##file"):
             self.show_save_as, self.show_open = not self.show_save_as, False
             if self.show_save_as and not self.save_path:
                 self.save_path = self._suggested_path()
         imgui.same_line()
-        if imgui.button("Reset##file"):
+        if self._button("Reset##file"):
             state.reset_to_preset()
         if imgui.is_item_hovered():
             imgui.set_tooltip("back to the leaf as it was opened (undoable)")
@@ -131,7 +139,7 @@ class FileBar:
             entered, self.open_path = imgui.input_text("##open-path", self.open_path,
                                                        imgui.InputTextFlags_.enter_returns_true)
             imgui.same_line()
-            if (imgui.button("Open##open-go") or entered) and self.open_path.strip():
+            if (self._button("Open##open-go") or entered) and self.open_path.strip():
                 self.request_open(self.open_path.strip())
                 self.show_open = False
         if self.show_save_as:
@@ -139,7 +147,7 @@ class FileBar:
             entered, self.save_path = imgui.input_text("##save-path", self.save_path,
                                                        imgui.InputTextFlags_.enter_returns_true)
             imgui.same_line()
-            if imgui.button("Save##save-go") or entered:
+            if self._button("Save##save-go") or entered:
                 if state.save_as(self.save_path.strip()):
                     self.show_save_as = False
         where = str(state.path) if state.path else "(not saved)"
@@ -172,18 +180,18 @@ class FileBar:
         if not state.can_save:
             imgui.set_next_item_width(360)
             _, self.save_path = imgui.input_text("save as##confirm-path", self.save_path or self._suggested_path())
-        if imgui.button("Save##confirm"):
+        if self._button("Save##confirm"):
             ok = state.save() if state.can_save else state.save_as(self.save_path.strip())
             if ok:
                 self._finish(run=True)
                 imgui.close_current_popup()
         imgui.same_line()
-        if imgui.button("Discard##confirm"):
+        if self._button("Discard##confirm"):
             self._finish(run=True)
             imgui.close_current_popup()
         imgui.same_line()
         escape = imgui.is_key_pressed(imgui.Key.escape, False) and imgui.get_frame_count() > self._opened_at
-        if imgui.button("Cancel##confirm") or escape:
+        if self._button("Cancel##confirm") or escape:
             self._finish(run=False)
             imgui.close_current_popup()
         imgui.end_popup()
@@ -213,15 +221,19 @@ def draw_help(center: imgui.ImVec2) -> None:
     imgui.end()
 
 
-def draw_status(pos: imgui.ImVec2, text: str) -> None:
-    """The one-line status (fps, triangles, GL_RENDERER) at ``pos`` (bottom-left of the viewport)."""
+def draw_status(pos: imgui.ImVec2, text: str, max_width: float) -> None:
+    """The status line (fps, triangles, GL_RENDERER) at ``pos`` (bottom-left of the viewport),
+    wrapped to stay inside the viewport's ``max_width``."""
     imgui.set_next_window_pos(pos, imgui.Cond_.always, imgui.ImVec2(0.0, 1.0))
+    imgui.set_next_window_size_constraints(imgui.ImVec2(0, 0), imgui.ImVec2(max(max_width, 40.0), 400.0))
     imgui.set_next_window_bg_alpha(0.55)
     flags = (imgui.WindowFlags_.no_decoration | imgui.WindowFlags_.no_inputs
              | imgui.WindowFlags_.always_auto_resize | imgui.WindowFlags_.no_saved_settings
              | imgui.WindowFlags_.no_focus_on_appearing | imgui.WindowFlags_.no_nav)
     imgui.begin("##status", None, flags)
+    imgui.push_text_wrap_pos(imgui.get_cursor_pos_x() + max(max_width - 20.0, 20.0))
     imgui.text(text)
+    imgui.pop_text_wrap_pos()
     imgui.end()
 
 
@@ -237,3 +249,39 @@ def draw_error_window(title: str, text: str, pos: imgui.ImVec2, width: float) ->
     dismissed = imgui.button("dismiss##error-window")
     imgui.end()
     return dismissed
+
+
+_FONTS = (
+    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/TTF/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+    "/usr/share/fonts/dejavu-sans-fonts/DejaVuSans.ttf",
+    "/Library/Fonts/DejaVuSans.ttf",
+    "C:/Windows/Fonts/DejaVuSans.ttf",
+)
+
+
+def _font_candidates() -> list[Path]:
+    found = [Path(p) for p in _FONTS if Path(p).is_file()]
+    if not found:
+        try:  # matplotlib (an optional extra) ships DejaVu Sans
+            import matplotlib
+
+            found.append(Path(matplotlib.get_data_path()) / "fonts/ttf/DejaVuSans.ttf")
+        except ImportError:
+            pass
+    return found
+
+
+def load_font(size: float = 15.0) -> bool:
+    """Use DejaVu Sans (it has the combining macron of v̄, x̄s) if one is found; else imgui's
+    built-in font. Returns whether labels may use combining marks."""
+    io = imgui.get_io()
+    for path in _font_candidates():
+        if path.is_file():
+            try:
+                io.fonts.add_font_from_file_ttf(str(path), size)
+                return True
+            except Exception:  # a corrupt font file: try the next
+                continue
+    return False

@@ -10,12 +10,17 @@ kept); :func:`drag_handle` turns the new leaf-space position back into parameter
   (eq. 3: ``s = A(v̄) + σ x̄s n(v̄) + z̄s ẑ``), kept strictly between its neighbours, and x̄s the
   signed distance along σ·n(v̄), so both halves follow (the model is symmetric in x̄s).
 
+When the leaf bends (``params.bending``), handles and control polygons are shown bent with the
+midrib (:class:`LeafFrame`), and a drag is mapped back through the bend at the handle's axis
+parameter, so the handle follows the cursor on the bent blade too.
+
 numpy only; the viewport projects these points and calls :func:`pick`.
 """
 
 from __future__ import annotations
 
-from typing import Iterable
+from functools import lru_cache
+from typing import Any, Iterable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -25,8 +30,8 @@ from ..model.edits import set_silhouette_point
 from ..model.leaf import control_polygons
 from ..model.params import LeafParams, ParamError
 
-__all__ = ["HANDLE_NAMES", "handle_points", "pick", "drag_handle", "to_leaf_space", "plane_hit",
-           "V_GAP"]
+__all__ = ["HANDLE_NAMES", "handle_points", "handle_parameters", "LeafFrame", "pick", "drag_handle",
+           "to_world", "to_leaf_space", "plane_hit", "drag_plane_normal", "V_GAP"]
 
 HANDLE_NAMES = ("a1", "a2", "s1+", "s2+", "s3+", "s1-", "s2-", "s3-")
 V_GAP = 0.01          # smallest spacing kept between consecutive v̄ while dragging
@@ -43,15 +48,88 @@ def handle_points(params: LeafParams) -> dict[str, NDArray[np.float64]]:
     return out
 
 
+def handle_parameters(params: LeafParams) -> dict[str, float]:
+    """The axis parameter v each handle belongs to (for the midrib bend): a1, a2 at 1/3, 2/3
+    (their Greville abscissae), sK± at v̄_K (they are placed relative to A(v̄_K), eq. 3)."""
+    out = {"a1": 1.0 / 3.0, "a2": 2.0 / 3.0}
+    for k, v in enumerate(params.shape.vbar):
+        out[f"s{k + 1}+"] = out[f"s{k + 1}-"] = float(v)
+    return out
+
+
+@lru_cache(maxsize=4)
+def _bend_profile(params: LeafParams) -> Any:
+    """The midrib bend of ``params`` (``leafview.model.beam``), or None when it does not bend."""
+    bending = getattr(params, "bending", None)
+    if bending is None or not getattr(bending, "active", False):
+        return None
+    try:
+        from ..model.beam import bend_profile
+    except ImportError:  # a model without bending
+        return None
+    profile = bend_profile(params)
+    return None if profile.identity else profile
+
+
+class LeafFrame:
+    """Maps overlay points between leaf space (the unbent model of eqs 1-6, where control points
+    live) and world space: the midrib bend and twist of ``leafview.model.leaf`` (``p' = A(v) +
+    Δ(v) + R(v)(p - A(v))`` at the point's axis parameter ``v``), then the leaf's transform."""
+
+    def __init__(self, params: LeafParams) -> None:
+        self.matrix = params.transform.matrix()
+        self.inverse = np.linalg.inv(self.matrix)
+        self.profile = _bend_profile(params)
+        self.axis_points = params.shape.axis_points()
+
+    def _bend(self, v: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """A(v), Δ(v) and R(v) for points at axis parameters ``v``."""
+        from ..model.beam import rotation, sample_clamped
+
+        vv = np.clip(np.atleast_1d(np.asarray(v, np.float64)), 0.0, 1.0)
+        a = bernstein(3, vv) @ self.axis_points
+        prof = self.profile
+        phi, _ = sample_clamped(prof.phi, vv)
+        delta, _ = sample_clamped(prof.delta, vv)
+        r = rotation(prof.axis, phi) @ rotation([0.0, 1.0, 0.0], prof.twist * vv)
+        return a, delta, r
+
+    def to_world(self, points: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
+        """Leaf-space ``points`` (N, 3) at axis parameters ``v`` (N,) to world space."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if self.profile is not None:
+            a, delta, r = self._bend(v)
+            p = a + delta + np.einsum("nij,nj->ni", r, p - a)
+        return p @ self.matrix[:3, :3].T + self.matrix[:3, 3]
+
+    def to_leaf(self, points: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
+        """The inverse of :meth:`to_world` (for the same ``v``)."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        p = p @ self.inverse[:3, :3].T + self.inverse[:3, 3]
+        if self.profile is not None:
+            a, delta, r = self._bend(v)
+            p = a + np.einsum("nji,nj->ni", r, p - a - delta)
+        return p
+
+    def plane_normal(self, v: float) -> NDArray[np.float64]:
+        """World normal of the (bent) leaf plane at axis parameter ``v``."""
+        n = np.array([0.0, 0.0, 1.0])
+        if self.profile is not None:
+            n = self._bend([v])[2][0] @ n
+        n = self.matrix[:3, :3] @ n
+        return n / np.linalg.norm(n)
+
+
 def to_world(params: LeafParams, points: ArrayLike) -> NDArray[np.float64]:
-    """Leaf space to world space with the leaf's transform."""
+    """Leaf space to world space with the leaf's transform (no bend: for surface points that
+    already include it, such as :func:`leafview.model.leaf.tessellate` vertices)."""
     m = params.transform.matrix()
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     return p @ m[:3, :3].T + m[:3, 3]
 
 
 def to_leaf_space(params: LeafParams, points: ArrayLike) -> NDArray[np.float64]:
-    """World space back to leaf space (the inverse of the leaf's transform)."""
+    """World space back to leaf space (the inverse of the leaf's transform, no bend)."""
     inv = np.linalg.inv(params.transform.matrix())
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     return p @ inv[:3, :3].T + inv[:3, 3]
@@ -81,12 +159,10 @@ def plane_hit(origin: NDArray[np.float64], direction: NDArray[np.float64], point
     return None if t <= 0 else origin + t * direction
 
 
-def drag_plane_normal(params: LeafParams, view_dir: NDArray[np.float64]) -> NDArray[np.float64]:
-    """World normal of the plane a handle moves in: the leaf plane, or the plane facing the
-    camera when the leaf is seen almost edge-on (then the in-plane motion is its projection)."""
-    m = params.transform.matrix()
-    n = m[:3, :3] @ np.array([0.0, 0.0, 1.0])
-    n /= np.linalg.norm(n)
+def drag_plane_normal(frame: LeafFrame, v: float, view_dir: NDArray[np.float64]) -> NDArray[np.float64]:
+    """World normal of the plane a handle at axis parameter ``v`` moves in: the (bent) leaf
+    plane there, or the plane facing the camera when that is seen almost edge-on."""
+    n = frame.plane_normal(v)
     if abs(float(np.dot(n, view_dir))) < 0.15:
         return -view_dir / np.linalg.norm(view_dir)
     return n

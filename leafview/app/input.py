@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from imgui_bundle import imgui
 
-from .handles import drag_handle, drag_plane_normal, pick, plane_hit, to_leaf_space
+from .handles import drag_handle, drag_plane_normal, pick, plane_hit
 from .orbit import project
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -118,11 +118,13 @@ class ViewportInput:
     def _start_handle(self, name: str, scene_w: float, h: int) -> None:
         v = self.viewer
         assert v.overlay is not None
-        point = v.overlay.handle_world[v.overlay.handle_names.index(name)]
+        i = v.overlay.handle_names.index(name)
+        point, along = v.overlay.handle_world[i], float(v.overlay.handle_v[i])
         view_dir = point - v.camera.eye()
-        normal = drag_plane_normal(v.state.params, view_dir / np.linalg.norm(view_dir))
+        assert v.overlay.frame is not None
+        normal = drag_plane_normal(v.overlay.frame, along, view_dir / np.linalg.norm(view_dir))
         self.drag = {"kind": "handle", "button": imgui.MouseButton_.left, "handle": name,
-                     "point": point, "normal": normal}
+                     "point": point, "normal": normal, "v": along, "frame": v.overlay.frame}
         self.hot = name
 
     def _move_handle(self, mx: float, my: float, scene_w: float, h: int) -> None:
@@ -132,6 +134,6 @@ class ViewportInput:
         hit = plane_hit(origin, direction, d["point"], d["normal"])
         if hit is None:
             return
-        leaf_point = to_leaf_space(v.state.params, hit)[0]
+        leaf_point = d["frame"].to_leaf(hit, [d["v"]])[0]
         name = d["handle"]
         v.state.apply(lambda p: drag_handle(p, name, leaf_point), gesture=f"handle:{name}")

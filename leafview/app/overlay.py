@@ -18,7 +18,7 @@ from ..gpu.shaders import build_program
 from ..model.bezier import bernstein
 from ..model.leaf import control_polygons
 from ..model.params import LeafParams
-from .handles import HANDLE_NAMES, handle_points, to_world
+from .handles import HANDLE_NAMES, LeafFrame, handle_parameters, handle_points
 
 __all__ = ["Overlay", "CURVE_COLORS", "control_lines", "ground_lines"]
 
@@ -40,21 +40,26 @@ def _segments(points: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.repeat(points, 2, axis=0)[1:-1]
 
 
-def control_lines(params: LeafParams) -> NDArray:
-    """Line vertices (world space) of every control polygon (dim) and curve (bright)."""
+def control_lines(params: LeafParams, frame: LeafFrame | None = None) -> NDArray:
+    """Line vertices (world space) of every control polygon (dim) and curve (bright); with the
+    midrib bend of ``frame`` (control points at their axis parameter, curve points at theirs)."""
+    frame = frame if frame is not None else LeafFrame(params)
     polys = control_polygons(params)
-    m = params.transform.matrix()
     t = np.linspace(0.0, 1.0, _CURVE_SAMPLES)
     basis = {n: bernstein(n, t) for n in (3, 4)}
+    v_axis = np.linspace(0.0, 1.0, 4)
+    v_side = np.array([0.0, *params.shape.vbar, 1.0])
     chunks = []
     for name, ctrl in polys.items():
         curve = basis[len(ctrl) - 1] @ ctrl
-        for pts, alpha in ((ctrl, 0.55), (curve, 1.0)):
-            seg = _segments(pts)
-            v = np.empty(len(seg), _VERTEX)
-            v["pos"] = seg @ m[:3, :3].T + m[:3, 3]
-            v["color"] = (*CURVE_COLORS[name[0]], alpha)
-            chunks.append(v)
+        v_ctrl = v_axis if len(ctrl) == 4 else v_side
+        for pts, v, alpha in ((ctrl, v_ctrl, 0.55), (curve, t, 1.0)):
+            world = frame.to_world(pts, v)
+            seg = _segments(world)
+            out = np.empty(len(seg), _VERTEX)
+            out["pos"] = seg
+            out["color"] = (*CURVE_COLORS[name[0]], alpha)
+            chunks.append(out)
     return np.concatenate(chunks)
 
 
@@ -87,6 +92,8 @@ class Overlay:
         self._handles = np.zeros(0, _VERTEX)
         self._key: tuple | None = None
         self.handle_world = np.zeros((0, 3))
+        self.handle_v = np.zeros(0)
+        self.frame: LeafFrame | None = None
         self.handle_names: tuple[str, ...] = HANDLE_NAMES
 
     def update(self, params: LeafParams, revision: int, ground_center: Sequence[float], ground_z: float,
@@ -96,9 +103,11 @@ class Overlay:
         if key == self._key:
             return
         self._key = key
-        self._lines = control_lines(params)
-        hp = handle_points(params)
-        self.handle_world = to_world(params, np.array([hp[n] for n in self.handle_names]))
+        self.frame = LeafFrame(params)
+        self._lines = control_lines(params, self.frame)
+        hp, hv = handle_points(params), handle_parameters(params)
+        self.handle_v = np.array([hv[n] for n in self.handle_names])
+        self.handle_world = self.frame.to_world(np.array([hp[n] for n in self.handle_names]), self.handle_v)
         step = 10 ** np.floor(np.log10(max(ground_half, 1e-3) / 2.0))
         self._ground = ground_lines(ground_center, ground_z, ground_half, step)
 

@@ -16,13 +16,14 @@ import math
 import unicodedata
 from typing import Any, Callable
 
+import numpy as np
 from imgui_bundle import imgui
 
 from ..model.edits import curve_axis, curve_longitudinal, scale_width, skew_axis
 from ..model.params import FieldSpec, LeafParams
 from .state import ViewerState
 
-__all__ = ["ParamPanel", "decimals", "groups_of"]
+__all__ = ["ParamPanel", "decimals", "groups_of", "from_ui", "plain_label"]
 
 _OPEN_BY_DEFAULT = {"axis", "silhouette", "curvature", "jitter", "ripple", "bending", "material"}
 
@@ -47,6 +48,32 @@ def plain_label(text: str) -> str:
     return "".join(c for c in unicodedata.normalize("NFD", text) if not unicodedata.combining(c))
 
 
+def _numbers(value: Any) -> list[float] | None:
+    """``value`` as a list of floats if it is a flat tuple/list of numbers, else None."""
+    if isinstance(value, (tuple, list)) and value and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
+        return [float(x) for x in value]
+    return None
+
+
+def from_ui(old: Any, new: Any) -> Any:
+    """A value returned by an imgui widget, cleaned: imgui edits float32 copies, so components
+    the user did not change come back rounded (1/3 → 0.3333333432674408). Those keep their old
+    value; changed ones get the shortest decimal of their float32 (0.10000000149 → 0.1)."""
+    if isinstance(new, (list, tuple)):
+        olds = list(old) if isinstance(old, (list, tuple)) and len(old) == len(new) else [None] * len(new)
+        return [from_ui(o, n) for o, n in zip(olds, new)]
+    if isinstance(new, float) and math.isfinite(new):
+        if isinstance(old, (int, float)) and not isinstance(old, bool) and np.float32(old) == np.float32(new):
+            return old
+        return float(str(np.float32(new)))
+    return new
+
+
+def _is_rows(value: Any) -> bool:
+    return isinstance(value, (tuple, list)) and bool(value) and all(_numbers(r) is not None for r in value)
+
+
 class ParamPanel:
     """Draws the parameter widgets inside the current imgui window.
 
@@ -64,14 +91,16 @@ class ParamPanel:
         self.rects: dict[str, tuple[float, float, float, float]] = {}
         self._relative: dict[str, float] = {"width": 1.0, "skew": 0.0}
         self._base: dict[str, LeafParams] = {}
+        self.expand_all = False  # open every header (tests, documentation screenshots)
 
     def label(self, text: str, path: str) -> str:
         shown = text if self.unicode_labels else plain_label(text)
         return f"{shown}##{path}"
 
     def _record(self, key: str) -> None:
+        """Remember the widget's frame (without its label) under ``key``."""
         lo, hi = imgui.get_item_rect_min(), imgui.get_item_rect_max()
-        self.rects[key] = (lo.x, lo.y, hi.x, hi.y)
+        self.rects[key] = (lo.x, lo.y, min(hi.x, lo.x + imgui.calc_item_width()), hi.y)
 
     def _after_widget(self, key: str) -> None:
         self._record(key)
@@ -80,43 +109,59 @@ class ParamPanel:
 
     # -- fields from their metadata -------------------------------------------------------------
     def draw_field(self, path: str, spec: FieldSpec) -> None:
-        """One widget for ``path``, chosen by ``spec.kind``."""
+        """One widget for ``path``, chosen by ``spec.kind`` and, for kinds this panel does not
+        name, by the shape of the value (a tuple of 2-4 numbers gets a slider per component)."""
         state = self.state
         value = state.get(path)
-        lo, hi = spec.soft_range
+        lo, hi = (float(x) for x in spec.soft_range)
         fmt = f"%.{decimals(spec.step)}f"
         label = self.label(spec.label, path)
         kind = spec.kind
-        if kind == "bool":
+        vector = _numbers(value)
+        if kind == "bool" or isinstance(value, bool):
             changed, new = imgui.checkbox(label, bool(value))
-        elif kind == "int":
+        elif kind == "int" or (isinstance(value, int) and kind != "float"):
             changed, new = imgui.slider_int(label, int(value), int(lo), int(hi))
-        elif kind == "float":
-            changed, new = imgui.slider_float(label, float(value), float(lo), float(hi), fmt)
-        elif kind == "color":
-            changed, new = imgui.color_edit3(label, [float(x) for x in value], imgui.ColorEditFlags_.float)
-        elif kind == "vec3":
-            changed, new = imgui.slider_float3(label, [float(x) for x in value], float(lo), float(hi), fmt)
-        elif kind == "rows":
+        elif kind == "float" or isinstance(value, (int, float)):
+            changed, new = imgui.slider_float(label, float(value), lo, hi, fmt)
+        elif kind == "color" and vector is not None and len(vector) == 3:
+            changed, new = imgui.color_edit3(label, vector, imgui.ColorEditFlags_.float)
+        elif kind == "rows" or _is_rows(value):
             self._draw_rows(path, spec, value, fmt)
             return
-        else:  # a kind this panel does not know yet: show it, never crash
+        elif vector is not None and 2 <= len(vector) <= 4:
+            slider = {2: imgui.slider_float2, 3: imgui.slider_float3, 4: imgui.slider_float4}[len(vector)]
+            changed, new = slider(label, vector, lo, hi, fmt)
+        else:  # a kind this panel cannot edit: show it, never crash
             imgui.text_disabled(f"{plain_label(spec.label)}: {value!r} ({kind})")
             self._record(path)
             return
         if changed:
-            state.set_field(path, new, gesture=kind not in ("bool",))
+            state.set_field(path, from_ui(value, new), gesture=not isinstance(new, bool))
         self._after_widget(path)
+        self._tooltip(path, spec)
+
+    @staticmethod
+    def _tooltip(path: str, spec: FieldSpec) -> None:
+        if imgui.is_item_hovered(imgui.HoveredFlags_.for_tooltip):
+            lo, hi = spec.soft_range
+            imgui.set_tooltip(f"{spec.label}\n{path}: slider {lo:g} … {hi:g}, step {spec.step:g}\n"
+                              "Ctrl+click to type a value")
 
     def _draw_rows(self, path: str, spec: FieldSpec, value: Any, fmt: str) -> None:
         lo, hi = spec.soft_range
         imgui.text(spec.label if self.unicode_labels else plain_label(spec.label))
         rows = [list(map(float, r)) for r in value]
+        prefix = "S" if spec.group == "silhouette" else "row "
         for i, row in enumerate(rows):
             key = f"{path}[{i}]"
-            changed, new = imgui.slider_float3(f"S{i + 1}##{key}", row, float(lo), float(hi), fmt)
+            slider = {2: imgui.slider_float2, 3: imgui.slider_float3, 4: imgui.slider_float4}.get(len(row))
+            if slider is None:
+                imgui.text_disabled(f"{prefix}{i + 1}: {row}")
+                continue
+            changed, new = slider(f"{prefix}{i + 1}##{key}", row, float(lo), float(hi), fmt)
             if changed:
-                rows[i] = new
+                rows[i] = from_ui(row, new)
                 self.state.set_field(path, rows, gesture=True)
             self._after_widget(key)
 
@@ -124,7 +169,9 @@ class ParamPanel:
         """A collapsing header per parameter group, in field_specs order."""
         specs = self.state.specs()
         for group, paths in groups_of(specs).items():
-            if group in _OPEN_BY_DEFAULT:
+            if self.expand_all:
+                imgui.set_next_item_open(True, imgui.Cond_.always)
+            elif group in _OPEN_BY_DEFAULT:
                 imgui.set_next_item_open(True, imgui.Cond_.first_use_ever)
             if imgui.collapsing_header(f"{group.capitalize()}##group-{group}"):
                 imgui.push_id(group)
@@ -138,6 +185,7 @@ class ParamPanel:
         """A slider relative to the leaf at the start of the drag; it springs back on release."""
         changed, value = imgui.slider_float(f"{label}##edit-{key}", self._relative[key], lo, hi, fmt)
         if changed:
+            value = from_ui(None, value)
             base = self._base.setdefault(key, self.state.params)
             self._relative[key] = value
             self.state.apply(lambda _: edit(base, value), gesture=f"edit:{key}")
@@ -147,15 +195,17 @@ class ParamPanel:
             self._base.pop(key, None)
             self._relative[key] = 1.0 if key == "width" else 0.0
 
-    def _absolute_slider(self, key: str, label: str, value: float, edit: Callable[[LeafParams, float], LeafParams]) -> None:
+    def _absolute_slider(self, key: str, label: str, value: float,
+                         edit: Callable[[LeafParams, float], LeafParams]) -> None:
         changed, new = imgui.slider_float(f"{label}##edit-{key}", float(value), -0.3, 0.3, "%.3f")
         if changed:
+            new = from_ui(value, new)
             self.state.apply(lambda p: edit(p, new), gesture=f"edit:{key}")
         self._after_widget(f"edit:{key}")
 
     def draw_edits(self) -> None:
         """Width scaling, asymmetry and curvature sliders (seed 004 sec. 6, Fig. 7)."""
-        imgui.set_next_item_open(True, imgui.Cond_.first_use_ever)
+        imgui.set_next_item_open(True, imgui.Cond_.always if self.expand_all else imgui.Cond_.first_use_ever)
         if not imgui.collapsing_header("Edits (seed 004 sec. 6)##group-edits"):
             return
         sh = self.state.params.shape
@@ -171,6 +221,8 @@ class ParamPanel:
     # -- view settings (not saved with the leaf) ------------------------------------------------
     def draw_view(self) -> None:
         """Light direction, grid resolution and viewport toggles."""
+        if self.expand_all:
+            imgui.set_next_item_open(True, imgui.Cond_.always)
         if not imgui.collapsing_header("View##group-view"):
             return
         view = self.state.view

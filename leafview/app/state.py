@@ -40,13 +40,11 @@ class ViewSettings:
 
 
 def _plain(value: Any) -> Any:
-    """Tuples/lists of numbers to nested lists; float32 noise from the UI rounded away."""
+    """Tuples and arrays to nested lists (the form :func:`parse_params` reads)."""
     if isinstance(value, (tuple, list)):
         return [_plain(v) for v in value]
     if hasattr(value, "tolist"):
         return _plain(value.tolist())
-    if isinstance(value, float) and math.isfinite(value):
-        return float(f"{value:.7g}")
     return value
 
 
@@ -280,3 +278,20 @@ class ViewerState:
         self.error = None
         self.message = f"saved {p}"
         return True
+
+    def write_recovery(self, directory: str | Path | None = None) -> Path | None:
+        """If there are unsaved edits, write them to ``<name>.recovered.toml`` (never over an
+        existing file) and return its path. For when the viewer is stopped without asking
+        (Ctrl+C in the terminal, a crash); the current file is left untouched."""
+        if not self.dirty:
+            return None
+        folder = Path(directory) if directory is not None else Path.cwd()
+        stem = self.path.stem if self.path else (self.params.name or "leaf")
+        target, n = folder / f"{stem}.recovered.toml", 1
+        while target.exists():
+            target, n = folder / f"{stem}.recovered-{n}.toml", n + 1
+        try:
+            self.params.save(target)
+        except (OSError, ParamError):
+            return None
+        return target

@@ -4,14 +4,15 @@ imgui panel into an offscreen framebuffer, from imgui's io (keys, mouse) and the
 
 :mod:`leafview.app.window` feeds it glfw input and copies the frame to the screen; the tests and
 ``leafview bench`` drive it on a headless EGL context with injected imgui events. An edit made
-during a frame (panel, handle drag, shortcut) is uploaded (the 320-byte Leaf block plus one tiny
-compute dispatch, nothing else) before that same frame's scene is drawn.
+during a frame (panel, handle drag, shortcut) is uploaded (the leaf's uniform block, under 1 KiB,
+plus one tiny compute dispatch; nothing else) before that same frame's scene is drawn.
 """
 
 from __future__ import annotations
 
 import sys
 import time
+import traceback
 from collections import deque
 from functools import lru_cache
 from pathlib import Path
@@ -27,48 +28,19 @@ from ..model.leaf import tessellate
 from ..model.params import LeafParams
 from ..resources import builtin_presets, preset_dir
 from . import hotreload
-from .chrome import FileBar, draw_error_window, draw_help, draw_status
+from .chrome import FileBar, draw_error_window, draw_help, draw_status, load_font
+from .handles import to_world
 from .imgui_gl import ImguiRenderer
 from .input import ViewportInput
 from .orbit import OrbitCamera
 from .overlay import Overlay
 from .panel import ParamPanel
-from .handles import to_world
 from .state import ViewerState
 
-__all__ = ["Viewer", "PANEL_WIDTH", "BACKGROUND", "load_font"]
+__all__ = ["Viewer", "PANEL_WIDTH", "BACKGROUND", "open_state", "is_software"]
 
 PANEL_WIDTH = 400
 BACKGROUND = (0.115, 0.125, 0.14, 1.0)
-_FONTS = (
-    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-    "/usr/share/fonts/TTF/DejaVuSans.ttf",
-    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-    "/usr/share/fonts/dejavu-sans-fonts/DejaVuSans.ttf",
-    "/Library/Fonts/DejaVuSans.ttf",
-    "C:/Windows/Fonts/DejaVuSans.ttf",
-)
-
-
-def load_font(size: float = 15.0) -> bool:
-    """Use DejaVu Sans (it has the combining macron of v̄, x̄s) if one is found; else imgui's
-    built-in font. Returns whether labels may use combining marks."""
-    candidates = [Path(p) for p in _FONTS]
-    try:  # matplotlib (an optional extra) ships DejaVu Sans
-        import matplotlib
-
-        candidates.append(Path(matplotlib.get_data_path()) / "fonts/ttf/DejaVuSans.ttf")
-    except ImportError:
-        pass
-    io = imgui.get_io()
-    for path in candidates:
-        if path.is_file():
-            try:
-                io.fonts.add_font_from_file_ttf(str(path), size)
-                return True
-            except Exception:  # a corrupt font file: try the next
-                continue
-    return False
 
 
 def is_software(gl_renderer: str) -> bool:
@@ -130,6 +102,7 @@ class Viewer:
         self.watcher = hotreload.ShaderWatcher() if dev else None
         self.shader_error: str | None = None
         self.gl_errors: list[tuple[int, str]] = []
+        self.internal_errors = 0  # exceptions caught in the UI code (reported, never fatal)
         self.frame_index = 0
         self.fps = 0.0
         self._dts: deque[float] = deque(maxlen=30)
@@ -161,7 +134,6 @@ class Viewer:
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         size = float(np.max(hi - lo))
         self.ground = ((lo[:2] + hi[:2]) / 2, float(lo[2] - 0.03 * size), max(1.0, 1.5 * size))
-        self._uploaded = -1  # re-place the ground in the overlay
 
     # -- one frame ------------------------------------------------------------------------------
     def frame(self, window_size: tuple[int, int], fb_size: tuple[int, int] | None = None,
@@ -183,8 +155,7 @@ class Viewer:
             self._framed_loads = self.state.loads
 
         imgui.new_frame()
-        self.input.update(scene_w, h)
-        self._draw_ui(w, h, scene_w)
+        self._run_ui(scene_w, w, h)
         imgui.render()
 
         self._upload()
@@ -193,7 +164,7 @@ class Viewer:
         self._draw_scene(scene_px, fh, scene_w, h)
         if self.screenshot_requested:
             self.screenshot_requested = False
-            self._write_screenshot(fbo, scene_px, fh)
+            self._write_screenshot(scene_px, fh)
         fbo.use()
         self.ctx.viewport = (0, 0, fw, fh)
         assert self.gui is not None
@@ -204,6 +175,28 @@ class Viewer:
             self._dts.append(io.delta_time)
             self.fps = len(self._dts) / sum(self._dts)
         return fbo
+
+    def _run_ui(self, scene_w: float, w: int, h: int) -> None:
+        """Input and panel for this frame. A bug in them must not take the user's work down:
+        the exception is reported (terminal and panel), imgui's stacks are unwound and the
+        leaf stays as the last valid edit left it."""
+        recovery = imgui.internal.ErrorRecoveryState()
+        imgui.internal.error_recovery_store_state(recovery)
+        try:
+            self.input.update(scene_w, h)
+            self._draw_ui(w, h, scene_w)
+        except Exception as exc:
+            traceback.print_exc(file=sys.stderr)
+            self.internal_errors += 1
+            self.state.error = (f"internal error: {type(exc).__name__}: {exc} (details on the terminal; "
+                                "your leaf is unchanged: save it)")
+            io = imgui.get_io()
+            asserting = io.config_error_recovery_enable_assert
+            io.config_error_recovery_enable_assert = False
+            try:
+                imgui.internal.error_recovery_try_to_recover_state(recovery)
+            finally:
+                io.config_error_recovery_enable_assert = asserting
 
     def _draw_ui(self, w: int, h: int, scene_w: float) -> None:
         _, panel_w = self.layout(w)
@@ -225,7 +218,7 @@ class Viewer:
         nu, nv = view.grid
         fps = f"{self.fps:5.1f} fps ({1000 / self.fps:.1f} ms)" if self.fps else "  –  fps"
         status = f"{fps}   {2 * (nu - 1) * (nv - 1):,} triangles   {self.gl_renderer}   H: keys"
-        draw_status(imgui.ImVec2(8, h - 8), status)
+        draw_status(imgui.ImVec2(8, h - 8), status, scene_w - 16)
         if view.show_help:
             draw_help(imgui.ImVec2(scene_w / 2, h / 2))
         if self.shader_error and draw_error_window("Shader error (--dev)", self.shader_error,
@@ -233,18 +226,18 @@ class Viewer:
             self.shader_error = None
 
     def _upload(self) -> None:
-        """Upload the leaf if it changed since the last frame (uniform block only)."""
+        """Upload the leaf if it changed since the last frame (uniform block only); rebuild the
+        overlay's vertices if the leaf or the ground placement changed."""
         state = self.state
-        if state.revision == self._uploaded:
-            self.last_upload_bytes = 0
-            return
         assert self.renderer is not None and self.overlay is not None
-        before = self.renderer.uploads
-        self.renderer.set_leaf(state.params)
-        self.last_upload_bytes = self.renderer.uploads - before
+        self.last_upload_bytes = 0
+        if state.revision != self._uploaded:
+            before = self.renderer.uploads
+            self.renderer.set_leaf(state.params)
+            self.last_upload_bytes = self.renderer.uploads - before
+            self._uploaded = state.revision
         center, z, half = self.ground
         self.overlay.update(state.params, state.revision, center, z, half)
-        self._uploaded = state.revision
 
     def _draw_scene(self, px_w: int, px_h: int, scene_w: float, h: int) -> None:
         assert self.renderer is not None and self.overlay is not None
@@ -306,7 +299,7 @@ class Viewer:
         return img
 
     # -- screenshots, shaders, errors -----------------------------------------------------------
-    def _write_screenshot(self, fbo: moderngl.Framebuffer, w: int, h: int) -> None:
+    def _write_screenshot(self, w: int, h: int) -> None:
         from ..imaging import ImageWriteError, write_image
 
         img = self.read_frame((0, 0, w, h))

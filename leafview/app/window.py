@@ -75,6 +75,7 @@ class ViewerWindow:
         self._last_time = time.perf_counter()
         self._last_events = -1
         self._active_until = 0.0
+        self._shown_title = ""
 
     def _last_error(self) -> str:
         return self._errors[-1] if self._errors else "no reason given"
@@ -112,7 +113,10 @@ class ViewerWindow:
             glfw.wait_events_timeout(0.1)
             return not self.should_quit
         self.ctx.copy_framebuffer(self.ctx.screen, fbo)
-        glfw.set_window_title(self.window, f"{self.title}: {self.viewer.state.title}")
+        title = f"{self.title}: {self.viewer.state.title}"
+        if title != self._shown_title:
+            glfw.set_window_title(self.window, title)
+            self._shown_title = title
         glfw.swap_buffers(self.window)
         return not self.should_quit
 
@@ -122,10 +126,21 @@ class ViewerWindow:
         assert self.viewer is not None
         scripted = frames is not None
         n = 0
-        while not scripted or n < frames:
-            if not self.step(wait=not scripted):
-                break
-            n += 1
+        try:
+            while not scripted or n < frames:
+                if not self.step(wait=not scripted):
+                    break
+                n += 1
+        except BaseException:  # Ctrl+C in the terminal, or a failure outside the UI's guard
+            rescued = self.viewer.state.write_recovery()
+            if rescued is not None:
+                print(f"leafview view: stopped with unsaved edits; they were written to {rescued}",
+                      file=sys.stderr, flush=True)
+            raise
+        if scripted:
+            v = self.viewer
+            print(f"leafview view: {n} frames, {v.fps:.1f} fps over the last {len(v._dts)} "
+                  f"({v.gl_renderer})", flush=True)
         if screenshot is not None:
             self.write_screenshot(screenshot, n)
         if self.viewer.gl_errors:

@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from ..model.beam import BEND_SAMPLES, bend_profile
 from ..model.fbm import RIPPLE_SAMPLES
-from ..model.leaf import JITTER_TABLE_SIZE, jitter_table
+from ..model.leaf import APEX, BASE, JITTER_TABLE_SIZE, jitter_table
 from ..model.params import LeafParams
 
 __all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "pack_leaf", "pack_leaves", "ripple_keys", "generated_sources"]
@@ -176,11 +176,17 @@ def pack_leaves(params: Iterable[LeafParams]) -> tuple[NDArray[Any], NDArray[np.
     return recs, table.astype(np.float32)
 
 
+def _vec(v: Any) -> str:
+    return ", ".join(f"{float(x):.1f}" for x in v)
+
+
 def generated_sources() -> dict[str, str]:
     """Virtual include files produced from the declarations above."""
     return {
         "generated/constants.glsl": (f"#define RIPPLE_SAMPLES {RIPPLE_SAMPLES}\n"
-                                     f"#define BEND_SAMPLES {BEND_SAMPLES}\n"),
+                                     f"#define BEND_SAMPLES {BEND_SAMPLES}\n"
+                                     f"const vec3 LEAF_BASE = vec3({_vec(BASE)});\n"
+                                     f"const vec3 LEAF_APEX = vec3({_vec(APEX)});\n"),
         "generated/leaf_block.glsl": "#include \"generated/constants.glsl\"\n" + LEAF_BLOCK.glsl(LEAF_BINDING),
         "generated/frame_block.glsl": FRAME_BLOCK.glsl(FRAME_BINDING),
     }

@@ -23,6 +23,8 @@ direction in leaf space), so the bend is described by the accumulated angle Φ(v
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -91,6 +93,8 @@ class BendProfile:
 
     def __init__(self, axis: NDArray[np.float64], phi: NDArray[np.float64], delta: NDArray[np.float64],
                  twist: float) -> None:
+        for a in (axis, phi, delta):
+            a.setflags(write=False)  # profiles are cached and shared
         self.axis, self.phi, self.delta, self.twist = axis, phi, delta, twist
 
     @property
@@ -119,8 +123,20 @@ def sample_clamped(values: ArrayLike, v: ArrayLike) -> tuple[NDArray[np.float64]
 
 
 def bend_profile(params: LeafParams) -> BendProfile:
-    """Solve the petiole + midrib chain under the blade's load (see the module docstring)."""
+    """Solve the petiole + midrib chain under the blade's load (see the module docstring).
+
+    Cached on the parts of the parameters the bend depends on (shape, bending, rotation and
+    scale), so the renderer and the viewer's overlay share one solve per edit."""
+    t = params.transform
+    return _bend_profile_cached(params.shape, params.bending, t.rotation, t.scale)
+
+
+@lru_cache(maxsize=64)
+def _bend_profile_cached(shape, bending, angles, scale) -> BendProfile:
     from .leaf import evaluate  # local: leaf imports this module
+    from .params import Transform
+
+    params = LeafParams(shape=shape, bending=bending, transform=Transform(rotation=angles, scale=scale))
 
     b = params.bending
     k = BEND_SAMPLES

@@ -47,8 +47,8 @@ __all__ = [
 ]
 
 JITTER_TABLE_SIZE = 256
-_BASE = np.zeros(3)
-_APEX = np.array([0.0, 1.0, 0.0])
+BASE = np.zeros(3)                # fixed base and apex of every leaf (seed 004 sec. 3)
+APEX = np.array([0.0, 1.0, 0.0])
 
 
 def jitter_table(jitter: Jitter, size: int = JITTER_TABLE_SIZE) -> NDArray[np.float32]:
@@ -102,7 +102,7 @@ def _side_controls(params: LeafParams) -> tuple[NDArray[np.float64], NDArray[np.
         cols = []
         for frac, zz in ((1.0, sh.zs), (1 / 3, np.asarray(sh.zf)), (2 / 3, np.asarray(sh.zg))):
             mid = a + (sigma * frac) * q + np.asarray(zz)[:, None] * z
-            cols.append(np.vstack([_BASE, mid, _APEX]))
+            cols.append(np.vstack([BASE, mid, APEX]))
         out.append(np.hstack(cols))
     return out[0], out[1]
 
