@@ -1,5 +1,8 @@
 // The leaf surface L_Ω(u, v) of seed 004 sec. 3 (eqs 2-6), its partial derivatives and normal,
 // plus the jittered silhouette of sec. 6.
+// Shader permutations: LEAF_NO_JITTER, LEAF_NO_RIPPLE and LEAF_NO_BEND compile the feature out
+// when no leaf of a draw uses it (leafview.gpu.layout.feature_defines); the results are
+// identical for the leaves they are used with.
 // The including shader defines LEAF as the LeafData to read (the Leaf uniform block or one row of
 // the Leaves storage buffer). Fields are read through it where they are used, never copied as a
 // whole struct: a copy makes the compiler load every field (and on llvmpipe each storage-buffer
@@ -148,6 +151,7 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
     e.Luv = sigma * db.x * (dAv - dPv) + dQv + vec3(0.0, 0.0, sigma * dot(db.yzw, dz));
 
     // jittered silhouette (sec. 6): D = amp j(v) s^2 tau(v) sigma n(v)
+#ifndef LEAF_NO_JITTER
     float amp = LEAF.jitter.x;
     if (amp > 0.0) {
         int size = int(LEAF.jitter.z);
@@ -177,12 +181,17 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
         e.Lv += (amp * s * s * sigma) * dg;
         e.Luv += (amp * 2.0 * s) * dg;
     }
+#endif
+#ifndef LEAF_NO_RIPPLE
     if (LEAF.deform.x > 0.0) {
         add_ripple(sigma, s, v, e);
     }
+#endif
+#ifndef LEAF_NO_BEND
     if (LEAF.deform.y > 0.0) {
         apply_bend(v, Av, dAv, e);
     }
+#endif
     return e;
 }
 

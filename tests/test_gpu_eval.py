@@ -168,3 +168,34 @@ def test_parameter_bytes_exclude_exactly_the_derived_members():
     derived = sum(LEAF_BLOCK.dtype.fields[n][0].itemsize for n in LEAF_BLOCK.derived)
     assert LEAF_BLOCK.parameter_nbytes + derived == LEAF_BLOCK.nbytes
     assert LEAF_BLOCK.nbytes <= 1024  # one leaf's uniform block stays well under 1 KiB
+
+
+def test_shader_permutations_match_the_full_program(gl, presets):
+    """For every preset, the variant compiled for its features (see feature_defines) captures
+    exactly the full program's vertices and normals."""
+    import moderngl
+
+    from leafview.gpu.layout import feature_defines, pack_leaf
+
+    assert set(feature_defines(pack_leaf(presets["ovate"]))) == {"LEAF_NO_JITTER", "LEAF_NO_RIPPLE", "LEAF_NO_BEND"}
+    assert feature_defines(pack_leaf(presets["willow"])) == {"LEAF_NO_JITTER": 1}
+    assert "LEAF_NO_JITTER" not in feature_defines(pack_leaf(presets["serrate"]))
+    uv = leafview.model.grid_uv(9, 15)
+    vbo = gl.ctx.buffer(uv.tobytes())
+    try:
+        for name, leaf in presets.items():
+            variant = gl._program(feature_defines(pack_leaf(leaf)))
+            gl.set_leaf(leaf)
+            outs = []
+            for prog in (gl.program, variant):
+                out = gl.ctx.buffer(reserve=len(uv) * 24)
+                vao = gl.ctx.vertex_array(prog, [(vbo, "2f", "in_uv")])
+                gl._bind()
+                gl._capture_target().use()
+                vao.transform(out, mode=moderngl.POINTS, vertices=len(uv))
+                outs.append(np.frombuffer(out.read(), np.float32).copy())
+                vao.release()
+                out.release()
+            np.testing.assert_array_equal(outs[0], outs[1], err_msg=name)
+    finally:
+        vbo.release()

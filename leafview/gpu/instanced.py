@@ -27,7 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 from ..camera import Camera
 from ..model.leaf import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table, tessellate
 from ..model.params import Jitter, LeafParams, Material, Shape, Transform
-from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, LEAVES_BINDING, pack_leaf, pack_leaves
+from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, LEAVES_BINDING, feature_defines, pack_leaf, pack_leaves
 from .prepare import LeafPrepare
 from .ripple import RipplePass
 from .renderer import Lighting, fill_frame
@@ -233,7 +233,7 @@ class InstancedLeaves(_Batch):
                     f"(at most {limit // LEAF_BLOCK.nbytes} leaves per draw)")
             self.nu, self.nv = grid
             self.program = self._own(build_program(ctx, "leaf.vert", "leaf.frag",
-                                                   defines={"LEAF_INSTANCED": 1},
+                                                   defines={"LEAF_INSTANCED": 1, **feature_defines(recs)},
                                                    varyings=("v_world", "v_normal")))
             self.program["Frame"].binding = FRAME_BINDING
             self.ssbo = self._own(ctx.buffer(recs.tobytes() if self.count else

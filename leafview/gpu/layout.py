@@ -22,7 +22,7 @@ from ..model.fbm import RIPPLE_SAMPLES
 from ..model.leaf import APEX, BASE, JITTER_TABLE_SIZE, jitter_table
 from ..model.params import LeafParams
 
-__all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "pack_leaf", "pack_leaves", "ripple_keys", "generated_sources"]
+__all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources"]
 
 _TYPES = {"vec4": ("<f4", (4,)), "ivec4": ("<i4", (4,)), "mat4": ("<f4", (4, 4))}
 
@@ -143,6 +143,20 @@ def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: 
         rec["bend_axis"] = (1.0, 0.0, 0.0, 0.0)
         rec["bend"] = 0.0
     return rec
+
+
+def feature_defines(records: np.ndarray) -> dict[str, int]:
+    """Shader permutation for a draw of ``records``: compile out jitter, ripples or bending when
+    no record uses them (llvmpipe runs vertex shaders on the CPU, where unused branches cost)."""
+    recs = np.atleast_1d(records)
+    defines = {}
+    if not (recs["jitter"][:, 0] > 0).any():
+        defines["LEAF_NO_JITTER"] = 1
+    if not (recs["deform"][:, 0] > 0).any():
+        defines["LEAF_NO_RIPPLE"] = 1
+    if not (recs["deform"][:, 1] > 0).any():
+        defines["LEAF_NO_BEND"] = 1
+    return defines
 
 
 def ripple_keys(params: Iterable[LeafParams]) -> list[tuple[int, float]]:

@@ -18,7 +18,8 @@ from ..camera import VIEWS, Camera, frame_view
 from ..model.leaf import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table
 from ..model.params import LeafParams
 from .context import create_headless_context
-from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BINDING, LEAF_BLOCK, pack_leaf, pack_leaves, ripple_keys
+from .layout import (FRAME_BINDING, FRAME_BLOCK, LEAF_BINDING, LEAF_BLOCK, feature_defines, pack_leaf, pack_leaves,
+                     ripple_keys)
 from .prepare import LeafPrepare
 from .ripple import RipplePass
 from .shaders import build_program
@@ -28,7 +29,8 @@ __all__ = ["LeafRenderer", "DEFAULT_GRID", "BATCH", "Lighting", "fill_frame"]
 DEFAULT_GRID = (33, 65)
 BATCH = 64            # leaves per atlas in render_many
 _MAX_ATLAS = 4096     # atlas side limit in pixels (well inside GL_MAX_RENDERBUFFER_SIZE)
-_MAX_CACHED = 3
+_MAX_CACHED = 3       # framebuffers
+_MAX_GRIDS = 8        # (program variant, grid) vertex arrays
 
 
 class Lighting:
@@ -97,10 +99,8 @@ class LeafRenderer:
     def __init__(self, ctx: moderngl.Context | None = None) -> None:
         self._owns_ctx = ctx is None
         self.ctx = ctx if ctx is not None else create_headless_context()
-        self.program = build_program(self.ctx, "leaf.vert", "leaf.frag",
-                                     varyings=("v_object", "v_object_normal"))
-        self.program["Leaf"].binding = LEAF_BINDING
-        self.program["Frame"].binding = FRAME_BINDING
+        self._programs: dict[tuple[str, ...], moderngl.Program] = {}
+        self.program = self._program({})  # every feature: set_leaf/draw/capture and the viewer
         self.prepare = LeafPrepare(self.ctx)
         self.ripples = RipplePass(self.ctx)
         self.leaf_ubo = self.ctx.buffer(reserve=LEAF_BLOCK.nbytes)
@@ -110,7 +110,7 @@ class LeafRenderer:
         self._jitter_seed: int | None = None
         self._leaf = LEAF_BLOCK.zeros()
         self._frame = FRAME_BLOCK.zeros()
-        self._grids = _LRU(_MAX_CACHED)
+        self._grids = _LRU(_MAX_GRIDS)
         self._targets = _LRU(_MAX_CACHED)
         self._capture_fbo: moderngl.Framebuffer | None = None
         self._capture_out: moderngl.Buffer | None = None
@@ -131,7 +131,7 @@ class LeafRenderer:
         if self._capture_fbo is not None:
             _release([self._capture_fbo, *self._capture_fbo.color_attachments])
             self._capture_fbo = None
-        _release([self.program, self.prepare, self.ripples, self.leaf_ubo, self.frame_ubo, self.jitter_tex, self._capture_out,
+        _release([*self._programs.values(), self.prepare, self.ripples, self.leaf_ubo, self.frame_ubo, self.jitter_tex, self._capture_out,
                   self._batch_leaf, self._batch_frame])
         self._capture_out = self._batch_leaf = self._batch_frame = None
         if self._owns_ctx:
@@ -180,21 +180,34 @@ class LeafRenderer:
         self.jitter_tex.use(location=0)
         self.ripples.bind()
 
+    def _program(self, defines: dict[str, int]) -> moderngl.Program:
+        """The leaf program for a feature set (see ``feature_defines``), compiled once."""
+        key = tuple(sorted(defines))
+        if key not in self._programs:
+            prog = build_program(self.ctx, "leaf.vert", "leaf.frag", defines=defines,
+                                 varyings=("v_object", "v_object_normal"))
+            prog["Leaf"].binding = LEAF_BINDING
+            prog["Frame"].binding = FRAME_BINDING
+            self._programs[key] = prog
+        return self._programs[key]
+
     def grid(self, nu: int, nv: int) -> moderngl.VertexArray:
         """The (cached) vertex array of the (nu × nv) grid: (u, v) attributes and triangles."""
         return self._grid_entry(nu, nv)[0]
 
-    def _grid_entry(self, nu: int, nv: int) -> tuple[moderngl.VertexArray, ...]:
-        """(indexed vao for drawing, non-indexed vao for capture, vbo, ibo) of a grid, cached."""
+    def _grid_entry(self, nu: int, nv: int, program: moderngl.Program | None = None) -> tuple[Any, ...]:
+        """(indexed vao for drawing, non-indexed vao for capture, vbo, ibo) of a grid for
+        ``program`` (default the full one), cached."""
+        prog = program or self.program
+
         def make() -> tuple[Any, ...]:
             vbo = self.ctx.buffer(grid_uv(nu, nv).tobytes())
             ibo = self.ctx.buffer(grid_indices(nu, nv).tobytes())
-            vao = self.ctx.vertex_array(self.program, [(vbo, "2f", "in_uv")], index_buffer=ibo,
-                                        index_element_size=4)
-            points = self.ctx.vertex_array(self.program, [(vbo, "2f", "in_uv")])
+            vao = self.ctx.vertex_array(prog, [(vbo, "2f", "in_uv")], index_buffer=ibo, index_element_size=4)
+            points = self.ctx.vertex_array(prog, [(vbo, "2f", "in_uv")])
             return vao, points, vbo, ibo
 
-        return self._grids.get_or_make((nu, nv), make)
+        return self._grids.get_or_make((prog.glo, nu, nv), make)
 
     def _target(self, w: int, h: int, samples: int, linear: bool) -> tuple[moderngl.Framebuffer, ...]:
         def make() -> tuple[Any, ...]:
@@ -275,9 +288,12 @@ class LeafRenderer:
         for i in range(n):  # rows sit at the uniform-offset alignment: one small dispatch each
             self.prepare.run(self._batch_leaf, 1, offset=i * leaf_stride)
 
+        # the shader permutation without the features no leaf of this chunk uses
+        entry = self._grid_entry(*grid, self._program(feature_defines(records)))
+
         # 1. capture every leaf's grid from the vertex shader, frame each camera on it
         nverts = grid[0] * grid[1]
-        positions = self._capture_rows(leaf_stride, n, grid)
+        positions = self._capture_rows(leaf_stride, n, grid, entry[1])
         frames = np.zeros(n, dtype=FRAME_BLOCK.dtype)
         for i, leaf in enumerate(leaves):
             m = leaf.transform.matrix()
@@ -295,7 +311,7 @@ class LeafRenderer:
         draw_fbo.clear(*bg, depth=1.0)
         self.ctx.enable_only(moderngl.DEPTH_TEST)
         self._bind_tables()
-        vao = self.grid(*grid)
+        vao = entry[0]
         for i in range(n):
             x, y = (i % cols) * w, (i // cols) * h
             self.ctx.viewport = self.ctx.scissor = (x, y, w, h)
@@ -319,14 +335,14 @@ class LeafRenderer:
             images.append(np.ascontiguousarray(img))
         return images
 
-    def _capture_rows(self, leaf_stride: int, n: int, grid: tuple[int, int]) -> NDArray[np.float32]:
+    def _capture_rows(self, leaf_stride: int, n: int, grid: tuple[int, int],
+                      vao: moderngl.VertexArray) -> NDArray[np.float32]:
         """Leaf-space positions of the grid of each of ``n`` leaves stored in the batch buffer."""
         nverts = grid[0] * grid[1]
         need = n * nverts * 24
         if self._capture_out is None or self._capture_out.size < need:
             _release(self._capture_out)
             self._capture_out = self.ctx.buffer(reserve=_grow(need))
-        vao = self._grid_entry(*grid)[1]
         self._capture_target().use()
         self._bind_tables()
         self.frame_ubo.bind_to_uniform_block(FRAME_BINDING)
