@@ -33,14 +33,19 @@ def _size(text: str) -> int:
     return n
 
 
-def _grid(text: str) -> tuple[int, int]:
+def int_pair(text: str, *, lo: int, hi: int, what: str, example: str) -> tuple[int, int]:
+    """Parse ``AxB`` (two whole numbers, each in lo..hi) for argparse, with a clear message."""
     try:
-        nu, nv = (int(x) for x in text.lower().split("x"))
+        a, b = (int(x) for x in text.lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected NUxNV such as 33x65, got {text!r}") from None
-    if not (2 <= nu <= 1025 and 2 <= nv <= 1025):
-        raise argparse.ArgumentTypeError(f"grid {nu}x{nv} outside 2..1025 per direction")
-    return nu, nv
+        raise argparse.ArgumentTypeError(f"expected {what} such as {example}, got {text!r}") from None
+    if not (lo <= a <= hi and lo <= b <= hi):
+        raise argparse.ArgumentTypeError(f"{a}x{b} outside {lo}..{hi} per side")
+    return a, b
+
+
+def _grid(text: str) -> tuple[int, int]:
+    return int_pair(text, lo=2, hi=1025, what="NUxNV", example="33x65")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -15,13 +15,9 @@ __all__ = ["add_arguments", "view_main", "window_size"]
 
 def window_size(text: str) -> tuple[int, int]:
     """``WxH`` → (w, h), each 64..8192."""
-    try:
-        w, h = (int(x) for x in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 1280x800, got {text!r}") from None
-    if not (64 <= w <= 8192 and 64 <= h <= 8192):
-        raise argparse.ArgumentTypeError(f"window size {w}x{h} outside 64..8192 per side")
-    return w, h
+    from ..cli import int_pair
+
+    return int_pair(text, lo=64, hi=8192, what="WIDTHxHEIGHT", example="1280x800")
 
 
 def _frames(text: str) -> int:
