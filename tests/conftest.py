@@ -29,11 +29,16 @@ def gl_required() -> bool:
     return bool(os.environ.get("LEAFVIEW_REQUIRE_GL"))
 
 
-def _gl_unavailable(reason: str) -> None:
-    message = f"OpenGL 4.5 through EGL is unavailable: {reason}"
+def require_or_skip(message: str) -> None:
+    """A missing GL/display capability: a failure when LEAFVIEW_REQUIRE_GL is set, else a skip
+    that says so."""
     if gl_required():
         pytest.fail(f"{message} (LEAFVIEW_REQUIRE_GL is set, so this is a failure)", pytrace=False)
     pytest.skip(f"{message} (set LEAFVIEW_REQUIRE_GL=1 to make this a failure)")
+
+
+def _gl_unavailable(reason: str) -> None:
+    require_or_skip(f"OpenGL 4.5 through EGL is unavailable: {reason}")
 
 
 @pytest.fixture(scope="session")

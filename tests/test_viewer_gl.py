@@ -9,7 +9,7 @@ import shutil
 import numpy as np
 import pytest
 
-imgui = pytest.importorskip("imgui_bundle").imgui
+from imgui_bundle import imgui  # a hard dependency: missing means broken, not skipped
 
 from leafview.app.hotreload import ShaderWatcher  # noqa: E402
 from leafview.app.orbit import project  # noqa: E402
@@ -88,7 +88,9 @@ def test_multisampled_scene_resolves_with_smooth_edges(gl):
         finally:
             v.release()
     if gl.ctx.max_samples < 4:
-        pytest.skip("no 4× multisampling on this renderer")
+        from tests.conftest import require_or_skip
+
+        require_or_skip("no 4× multisampling on this renderer")
     g0, g4 = images[0], images[4]
     bg = round(BACKGROUND[1] * 255)
     leaf = g0 > bg + 20

@@ -9,7 +9,7 @@ from typing import Any, Callable
 
 import pytest
 
-imgui = pytest.importorskip("imgui_bundle").imgui
+from imgui_bundle import imgui  # a hard dependency: missing means broken, not skipped
 
 from leafview.app.chrome import FileBar  # noqa: E402
 from leafview.app.panel import ParamPanel, decimals, from_ui, groups_of  # noqa: E402

@@ -19,16 +19,14 @@ import pytest
 from leafview.imaging import PARAMS_ATTRIBUTE, read_image
 from leafview.model.params import LeafParams
 from leafview.resources import builtin_presets
-from tests.conftest import gl_required
+from tests.conftest import require_or_skip
 
 pytestmark = pytest.mark.gl  # the window tests also need Xvfb (started here)
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def _unavailable(reason: str) -> None:
-    if gl_required():
-        pytest.fail(f"{reason} (LEAFVIEW_REQUIRE_GL is set, so this is a failure)", pytrace=False)
-    pytest.skip(f"{reason} (set LEAFVIEW_REQUIRE_GL=1 to make this a failure)")
+    require_or_skip(reason)
 
 
 @pytest.fixture(scope="module")
