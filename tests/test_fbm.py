@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-import leafview
 from leafview.model.fbm import fbm_noise, hash_uniform, pcg, resample, sample_periodic, spectrum
 
 
@@ -104,4 +103,3 @@ def test_ripple_pass_is_batched_and_recomputes_only_changed_rows(gl):
     finally:
         rp.release()
     assert gl.ctx.error == "GL_NO_ERROR"
-    _ = leafview  # the module under test
