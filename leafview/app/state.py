@@ -185,20 +185,19 @@ class ViewerState:
 
     def undo(self) -> bool:
         """Step back one edit (Ctrl+Z); returns False when there is nothing to undo."""
-        self._gesture = None
-        if not self._undo:
-            return False
-        self._redo.append(self.params)
-        self._set(self._undo.pop())
-        return True
+        return self._step(self._undo, self._redo)
 
     def redo(self) -> bool:
         """Re-apply the last undone edit (Ctrl+Shift+Z)."""
+        return self._step(self._redo, self._undo)
+
+    def _step(self, source: list, target: list) -> bool:
+        """Move one state from ``source`` to the current leaf, keeping the current on ``target``."""
         self._gesture = None
-        if not self._redo:
+        if not source:
             return False
-        self._undo.append(self.params)
-        self._set(self._redo.pop())
+        target.append(self.params)
+        self._set(source.pop())
         return True
 
     def reset_to_preset(self) -> bool:
