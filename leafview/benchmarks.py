@@ -453,29 +453,56 @@ def format_table(res: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="leafview bench", description=__doc__.split("\n\n")[0])
+# Benchmark suites: name -> (module, run function, table function). ``run(quick, ctx)`` returns a
+# JSON-able dict with ``gl_renderer``; ``table(res)`` the readable report. "core" is this module.
+SUITES: dict[str, tuple[str, str, str]] = {
+    "core": ("leafview.benchmarks", "run", "format_table"),
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The arguments of ``leafview bench`` (shared by the CLI and ``bench/run_bench.py``)."""
+    parser.add_argument("suite", nargs="?", default="core", choices=[*SUITES, "all"],
+                        help="which benchmarks (default core: thumbnails, instancing, ripples, viewer)")
     parser.add_argument("--json", action="store_true", help="print the results as JSON")
-    parser.add_argument("--quick", action="store_true", help="a fast smoke run with small counts")
-    args = parser.parse_args(list(sys.argv[1:] if argv is None else argv))
+    parser.add_argument("--quick", action="store_true", help="small counts: a smoke run, not a measurement")
+
+
+def run_args(args: argparse.Namespace) -> int:
+    """Run the suite(s) named in ``args``; exit code 2 when GL or a baseline is missing."""
+    import importlib
+
     from .gpu.context import GLUnavailable
 
+    names = list(SUITES) if args.suite == "all" else [args.suite]
+    if "core" in names:
+        try:
+            import matplotlib  # noqa: F401  (the thumbnail baseline)
+        except ImportError:
+            print("leafview bench: matplotlib is needed for the baseline: pip install 'leafview[bench]'",
+                  file=sys.stderr)
+            return 2
+    results: dict[str, Any] = {}
     try:
-        import matplotlib  # noqa: F401  (the thumbnail baseline)
-    except ImportError:
-        print("leafview bench: matplotlib is needed for the baseline: pip install 'leafview[bench]'",
-              file=sys.stderr)
-        return 2
-    try:
-        res = run(quick=args.quick)
+        for name in names:
+            module, run_name, table_name = SUITES[name]
+            mod = importlib.import_module(module)
+            res = getattr(mod, run_name)(quick=args.quick)
+            results[name] = res
+            if not args.json:
+                print(getattr(mod, table_name)(res), flush=True)
     except GLUnavailable as exc:
         print(f"leafview bench: {exc}", file=sys.stderr)
         return 2
     if args.json:
-        print(json.dumps(res, indent=2, allow_nan=False))
-    else:
-        print(format_table(res))
+        print(json.dumps(results[names[0]] if len(names) == 1 else results, indent=2, allow_nan=False))
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="leafview bench", description=__doc__.split("\n\n")[0])
+    add_arguments(parser)
+    return run_args(parser.parse_args(list(sys.argv[1:] if argv is None else argv)))
 
 
 if __name__ == "__main__":

@@ -7,20 +7,24 @@ an image that could not be written). A failing run writes no file.
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
 import time
 from pathlib import Path
 from typing import Sequence
 
 from . import __version__
+from .errors import UsageError
 from .model.params import LeafParams, ParamError
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 _VIEWS = ("top", "front", "three-quarter", "side")
 
-
-class UsageError(Exception):
-    """Bad command-line input; reported with exit code 2."""
+# Subcommands that live in their own modules: name -> (module, one-line help). Each module has
+# ``add_arguments(parser)`` and ``run(args) -> int``; it raises UsageError / ParamError for bad
+# input (exit 2) and writes no partial file.
+COMMANDS: dict[str, tuple[str, str]] = {
+}
 
 
 def _size(text: str) -> int:
@@ -79,9 +83,14 @@ def build_parser() -> argparse.ArgumentParser:
                                    "shows the keys.")
     add_view_arguments(v)
 
+    from .benchmarks import add_arguments as add_bench_arguments
+
     b = sub.add_parser("bench", help="measure rendering speed (prints GL_RENDERER and ratios)")
-    b.add_argument("--json", action="store_true", help="print the results as JSON")
-    b.add_argument("--quick", action="store_true", help="small counts: a smoke run, not a measurement")
+    add_bench_arguments(b)
+
+    for name, (module, text) in COMMANDS.items():
+        p = sub.add_parser(name, help=text, description=text)
+        importlib.import_module(module).add_arguments(p)
     return parser
 
 
@@ -98,9 +107,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             return view_main(args)
         if args.command == "bench":
-            from .benchmarks import main as bench_main
+            from .benchmarks import run_args
 
-            return bench_main((["--json"] if args.json else []) + (["--quick"] if args.quick else []))
+            return run_args(args)
+        if args.command in COMMANDS:
+            return importlib.import_module(COMMANDS[args.command][0]).run(args)
     except (UsageError, ParamError) as exc:
         print(f"leafview {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
