@@ -24,6 +24,7 @@ _VIEWS = ("top", "front", "three-quarter", "side")
 # ``add_arguments(parser)`` and ``run(args) -> int``; it raises UsageError / ParamError for bad
 # input (exit 2) and writes no partial file.
 COMMANDS: dict[str, tuple[str, str]] = {
+    "scene": ("leafview.scene_cli", "render, save, export or view a scene of many leaves"),
 }
 
 

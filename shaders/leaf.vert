@@ -1,11 +1,18 @@
 #version 450
 // Leaf vertex shader: turns each (u, v) of a fixed grid into the leaf's position and normal
-// from the Leaf uniform block (or, with LEAF_INSTANCED, one row of the Leaves storage buffer).
+// from the Leaf uniform block (or, with LEAF_INSTANCED / LEAF_INDIRECT, one row of the Leaves
+// storage buffer).
 // The same program is used with transform feedback (v_object, v_object_normal) by
 // leafview.gpu.evaluate, so what is tested is what is drawn.
 #include "generated/leaf_block.glsl"
 #include "generated/frame_block.glsl"
-#ifdef LEAF_INSTANCED
+#if defined(LEAF_INDIRECT)
+// scenes: the culling pass lists visible leaves per level of detail; each draw command's
+// baseInstance points at its level's list, read as a per-instance attribute
+layout(std430, binding = 2) readonly buffer Leaves { LeafData leaves[]; };
+in uint in_leaf;
+#define LEAF leaves[in_leaf]
+#elif defined(LEAF_INSTANCED)
 layout(std430, binding = 2) readonly buffer Leaves { LeafData leaves[]; };
 #define LEAF leaves[gl_InstanceID]
 #else

@@ -18,6 +18,39 @@ from leafview.model.params import LeafParams
 from leafview.resources import builtin_presets
 
 ROOT = Path(__file__).resolve().parent.parent
+IMAGES = Path(__file__).parent / "images"
+FAILURES = Path(__file__).parent / "_failures"
+PIXEL_TOL = 3               # llvmpipe varies by up to 3/255 between CPU vendors
+MAX_BAD_FRACTION = 0.005    # of the pixels may exceed PIXEL_TOL
+
+
+def compare(actual: np.ndarray, reference: np.ndarray) -> tuple[float, int]:
+    """(fraction of pixels off by more than PIXEL_TOL, largest difference)."""
+    diff = np.abs(actual.astype(np.int16) - reference.astype(np.int16)).max(axis=-1)
+    return float(np.mean(diff > PIXEL_TOL)), int(diff.max())
+
+
+def assert_matches_reference(actual: np.ndarray, stem: str, request: pytest.FixtureRequest) -> None:
+    """Compare ``actual`` with ``tests/images/<stem>.png`` (regenerated with ``--regen-images``);
+    on failure the actual image and a ×8 diff go to ``tests/_failures``."""
+    from leafview.imaging import read_image, write_image
+
+    ref_path = IMAGES / f"{stem}.png"
+    if request.config.getoption("--regen-images"):
+        write_image(ref_path, actual)
+    assert ref_path.exists(), f"missing reference {ref_path}: run pytest --regen-images and look at it"
+    reference, _ = read_image(ref_path)
+    assert reference.shape == actual.shape
+    bad, worst = compare(actual, reference)
+    if bad > MAX_BAD_FRACTION:
+        FAILURES.mkdir(exist_ok=True)
+        write_image(FAILURES / f"{stem}_actual.png", actual)
+        diff = np.abs(actual.astype(np.int16) - reference.astype(np.int16))
+        diff_img = np.clip(diff * 8, 0, 255).astype(np.uint8)
+        diff_img[..., 3] = 255
+        write_image(FAILURES / f"{stem}_diff.png", diff_img)
+    assert bad <= MAX_BAD_FRACTION, (f"{stem}: {bad:.2%} of pixels off by more than {PIXEL_TOL}/255 "
+                                     f"(largest {worst}); see {FAILURES}")
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:

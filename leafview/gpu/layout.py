@@ -22,7 +22,7 @@ from ..model.fbm import RIPPLE_SAMPLES
 from ..model.leaf import APEX, BASE, JITTER_TABLE_SIZE, jitter_table
 from ..model.params import LeafParams
 
-__all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources"]
+__all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "SPECIES_CULL_BLOCK", "DRAW_COMMAND_DTYPE", "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources"]
 
 _TYPES = {"vec4": ("<f4", (4,)), "ivec4": ("<i4", (4,)), "mat4": ("<f4", (4, 4))}
 
@@ -55,11 +55,14 @@ class Block:
         dt = self.dtype
         return sum(dt.fields[name][0].itemsize for name, _, _ in self.members if name not in self.derived)
 
-    def glsl(self, binding: int) -> str:
+    def struct_glsl(self) -> str:
         lines = [f"// generated from leafview/gpu/layout.py: {self.doc}", f"struct {self.struct_name} {{"]
         for name, glsl, count in self.members:
             lines.append(f"    {glsl} {name}{'' if count == 1 else f'[{count}]'};")
-        lines += ["};", f"layout(std140, binding = {binding}) uniform {self.block_name} {{",
+        return "\n".join(lines + ["};", ""])
+
+    def glsl(self, binding: int) -> str:
+        lines = [self.struct_glsl().rstrip("\n"), f"layout(std140, binding = {binding}) uniform {self.block_name} {{",
                   f"    {self.struct_name} {self.block_name.lower()};", "};", ""]
         return "\n".join(lines)
 
@@ -108,6 +111,21 @@ FRAME_BLOCK = Block(
     ),
     "camera, lights and output flags of one frame",
 )
+
+SPECIES_CULL_BLOCK = Block(
+    "SpeciesCull", "SpeciesCullBlock",
+    (
+        ("sphere", "vec4", 1),     # leaf-space bounding sphere of the species' leaves: centre, radius
+        ("lod_error", "vec4", 1),  # outline error (leaf lengths) of level k's grid vs the surface; [0] = 0
+    ),
+    "one species of a scene: what the culling pass needs (leafview/gpu/scene.py)",
+)
+
+# glMultiDrawElementsIndirect's command, fixed by OpenGL (20 bytes, std430 array stride 20)
+DRAW_COMMAND_DTYPE = np.dtype([("count", "<u4"), ("instance_count", "<u4"), ("first_index", "<u4"),
+                               ("base_vertex", "<i4"), ("base_instance", "<u4")])
+_DRAW_COMMAND_GLSL = ("struct DrawCommand { uint count; uint instance_count; uint first_index; "
+                      "int base_vertex; uint base_instance; };\n")
 
 LEAF_BINDING, FRAME_BINDING = 0, 1   # uniform blocks
 LEAVES_BINDING = 2                   # storage buffer of LeafData rows (instancing, prepare pass)
@@ -203,4 +221,5 @@ def generated_sources() -> dict[str, str]:
                                      f"const vec3 LEAF_APEX = vec3({_vec(APEX)});\n"),
         "generated/leaf_block.glsl": "#include \"generated/constants.glsl\"\n" + LEAF_BLOCK.glsl(LEAF_BINDING),
         "generated/frame_block.glsl": FRAME_BLOCK.glsl(FRAME_BINDING),
+        "generated/scene_blocks.glsl": SPECIES_CULL_BLOCK.struct_glsl() + _DRAW_COMMAND_GLSL,
     }

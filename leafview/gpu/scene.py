@@ -1,0 +1,535 @@
+"""Scenes on the GPU: one storage-buffer row per leaf, GPU culling and level of detail, and one
+indirect multi-draw per batch.
+
+Per frame, for each batch of leaves:
+
+1. the draw commands (one per level of detail) are reset: ``levels × 20`` bytes, the only
+   upload, whatever the leaf count;
+2. ``scene_cull.comp`` tests every leaf's bounding sphere against the frustum and a minimum
+   projected size, picks its level (the coarsest grid whose outline error stays under
+   ``max_error_px``) and appends its index to that level's list;
+3. ``glMultiDrawElementsIndirect`` draws the levels' grids; ``leaf.vert`` (``LEAF_INDIRECT``)
+   reads the leaf index as a per-instance attribute from the list (the command's
+   ``baseInstance`` selects the list) and evaluates the leaf from its row.
+
+No per-leaf work happens on the CPU after the scene is uploaded. Leaf rows are
+:data:`~leafview.gpu.layout.LEAF_BLOCK` records (the same declaration as the single-leaf uniform
+block); a batch holds at most ``GL_MAX_SHADER_STORAGE_BLOCK_SIZE`` bytes of them, so large scenes
+are split into batches automatically (:func:`plan_batches`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable, Sequence
+
+import moderngl
+import numpy as np
+from numpy.typing import NDArray
+
+from ..camera import Camera, frame_view
+from ..model.leaf import evaluate, grid_indices, grid_uv
+from ..model.scene import Scene
+from .context import check_error
+from .instanced import read_rgba
+from .layout import (DRAW_COMMAND_DTYPE, FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, LEAVES_BINDING,
+                     SPECIES_CULL_BLOCK, feature_defines, pack_leaves, ripple_keys)
+from .prepare import LeafPrepare
+from .renderer import Lighting, fill_frame
+from .ripple import RipplePass
+from .shaders import build_compute, build_program
+
+__all__ = ["LOD_GRIDS", "CullSettings", "SceneRenderer", "SceneLimitError", "pack_scene", "species_cull", "plan_batches",
+           "frustum_planes", "cull_reference", "scene_camera", "SCENE_VIEWS"]
+
+LOD_GRIDS: tuple[tuple[int, int], ...] = ((9, 17), (5, 9), (3, 5))  # 256, 64, 16 triangles
+SPECIES_OF_BINDING, SPECIES_BINDING, COMMANDS_BINDING, VISIBLE_BINDING = 4, 5, 6, 7
+STEM_FRONT = (0.30, 0.22, 0.14, 0.0)
+STEM_BACK = (0.30, 0.22, 0.14)
+SCENE_VIEWS = ("three-quarter", "top", "front", "side", "ground")
+_LOCAL = 64
+
+
+class SceneLimitError(ValueError):
+    """A scene that cannot be drawn within this context's limits; the message names the limit."""
+
+
+# -- packing (numpy) ------------------------------------------------------------------------------
+def species_tables(scene: Scene) -> tuple[NDArray[Any], NDArray[np.float32], list[tuple[int, float]]]:
+    """Per-species LEAF_BLOCK records (bend solved once per species), the jitter table rows they
+    index and the ripple signal keys (row i of the signal buffer)."""
+    recs, table = pack_leaves(scene.species)
+    return recs, table, ripple_keys(scene.species)
+
+
+def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
+               species_records: NDArray[Any] | None = None) -> NDArray[Any]:
+    """LEAF_BLOCK rows of leaves ``start:stop``, vectorised: the species' record with Ω scaled by
+    the leaf's factors (as :func:`leafview.model.scene.vary_shape`), colours by its tint and the
+    model matrix set. Derived members are filled later by the prepare pass on the GPU."""
+    stop = len(scene) if stop is None else stop
+    if species_records is None:
+        species_records = species_tables(scene)[0]
+    ids = scene.species_id[start:stop]
+    recs = species_records[ids]
+    f = scene.factors[start:stop].astype(np.float32)
+    recs["a1"][:, :3] *= f[:, 0:3]
+    recs["a2"][:, :3] *= f[:, 3:6]
+    recs["vbar"][:, :3] = np.clip(recs["vbar"][:, :3] * f[:, 6:15:3], np.float32(0.02), np.float32(0.98))
+    recs["xs"][:, :3] *= f[:, 7:15:3]
+    recs["zs"][:, :3] *= f[:, 8:15:3]
+    recs["zf"][:, :3] *= f[:, 15:18]
+    recs["zg"][:, :3] *= f[:, 18:21]
+    t = scene.tint[start:stop, None].astype(np.float32)
+    recs["front"][:, :3] = np.clip(recs["front"][:, :3] * t, 0.0, 1.0)
+    recs["back"][:, :3] = np.clip(recs["back"][:, :3] * t, 0.0, 1.0)
+    recs["model"] = np.transpose(scene.matrices[start:stop], (0, 2, 1)).astype(np.float32)
+    return recs
+
+
+def _lod_error(params: Any, coarse: tuple[int, int], fine: tuple[int, int] = (33, 65)) -> float:
+    """Largest distance (leaf lengths) between the surface and the piecewise-bilinear surface
+    through the ``coarse`` grid, sampled at the ``fine`` grid: how far the drawn outline can
+    move when a leaf drops to ``coarse``."""
+    uv = grid_uv(*fine).astype(np.float64)
+    ref = evaluate(params, uv[:, 0], uv[:, 1])
+    cu, cv = coarse
+    g = evaluate(params, *grid_uv(cu, cv).astype(np.float64).T).reshape(cv, cu, 3)
+    x = (uv[:, 0] + 1.0) / 2.0 * (cu - 1)
+    y = uv[:, 1] * (cv - 1)
+    i = np.minimum(x.astype(int), cu - 2)
+    j = np.minimum(y.astype(int), cv - 2)
+    a, b = (x - i)[:, None], (y - j)[:, None]
+    approx = ((1 - a) * (1 - b) * g[j, i] + a * (1 - b) * g[j, i + 1]
+              + (1 - a) * b * g[j + 1, i] + a * b * g[j + 1, i + 1])
+    return float(np.linalg.norm(ref - approx, axis=1).max())
+
+
+def species_cull(scene: Scene, grids: Sequence[tuple[int, int]] = LOD_GRIDS) -> NDArray[Any]:
+    """SPECIES_CULL_BLOCK rows: each species' leaf-space bounding sphere, widened for the scene's
+    per-leaf variation, and the outline error of each level's grid (see :func:`_lod_error`).
+
+    Variation bound: every control point moves by at most ``variation × |point|`` (factors in
+    ``1 ± variation``) and the surface is a convex combination of control points, so the sphere
+    grows by ``variation × max |point|``; the LOD errors are scaled by ``1 + 2 variation``."""
+    if len(grids) > 4:
+        raise ValueError("at most 4 levels of detail")
+    out = np.zeros(len(scene.species), SPECIES_CULL_BLOCK.dtype)
+    uv = grid_uv(33, 65).astype(np.float64)
+    var = scene.spec.variation
+    for k, sp in enumerate(scene.species):
+        pts = evaluate(sp, uv[:, 0], uv[:, 1])
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        center = (lo + hi) / 2
+        radius = float(np.linalg.norm(pts - center, axis=1).max())
+        radius += var * float(np.linalg.norm(pts, axis=1).max()) + 1e-3
+        out[k]["sphere"] = (*center, radius)
+        errs = [0.0] + [_lod_error(sp, g, grids[0]) for g in grids[1:]]
+        out[k]["lod_error"][:len(errs)] = np.asarray(errs) * (1.0 + 2.0 * var)
+    return out
+
+
+def plan_batches(n_leaves: int, max_block_bytes: int, max_groups: int = 65535,
+                 row_bytes: int = LEAF_BLOCK.nbytes) -> list[tuple[int, int]]:
+    """``(start, stop)`` ranges of leaves, each fitting one storage block of at most
+    ``max_block_bytes`` bytes and one dispatch of at most ``max_groups`` work groups."""
+    per = min(max_block_bytes // row_bytes, max_groups * _LOCAL)
+    if per < 1:
+        raise SceneLimitError(f"one {row_bytes}-byte leaf row exceeds GL_MAX_SHADER_STORAGE_BLOCK_SIZE = "
+                              f"{max_block_bytes} bytes")
+    return [(s, min(s + per, n_leaves)) for s in range(0, n_leaves, per)]
+
+
+# -- culling reference (numpy) ----------------------------------------------------------------
+def frustum_planes(view_proj: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(6, 4) world-space planes (n, d), inside where ``n·p + d ≥ 0``, unit normals, from the
+    column-vector matrix ``P · V`` (Gribb-Hartmann)."""
+    m = np.asarray(view_proj, np.float64)
+    r = [m[0], m[1], m[2], m[3]]
+    planes = np.array([r[3] + r[0], r[3] - r[0], r[3] + r[1], r[3] - r[1], r[3] + r[2], r[3] - r[2]])
+    return planes / np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+
+
+def _pixel_scale(camera: Camera, size: tuple[int, int]) -> float:
+    return float(camera.proj[1, 1]) * size[1] / 2.0
+
+
+@dataclass(frozen=True)
+class CullSettings:
+    """What the culling pass decides with: ``min_pixels`` (drop leaves whose bounding sphere
+    spans fewer pixels), ``max_error_px`` (largest outline error a coarser level may add),
+    ``cull`` (frustum and size tests on) and ``lod`` (levels chosen; off = finest grid)."""
+
+    min_pixels: float = 1.0
+    max_error_px: float = 0.75
+    cull: bool = True
+    lod: bool = True
+    level: int = -1      # >= 0: every visible leaf at this level (with lod on)
+
+    @property
+    def forced_level(self) -> int:
+        return self.level if self.lod else 0
+
+
+def cull_reference(scene: Scene, cull_rows: NDArray[Any], camera: Camera, size: tuple[int, int],
+                   settings: CullSettings = CullSettings(), levels: int = len(LOD_GRIDS)
+                   ) -> NDArray[np.int32]:
+    """The level each leaf gets (-1: culled), computed in numpy exactly as ``scene_cull.comp``."""
+    m = scene.matrices
+    sc = cull_rows[scene.species_id]
+    center = np.einsum("nij,nj->ni", m[:, :3, :3], sc["sphere"][:, :3]) + m[:, :3, 3]
+    scale = np.linalg.norm(m[:, :3, 0], axis=1)
+    radius = sc["sphere"][:, 3] * scale
+    ppu = np.full(len(scene), _pixel_scale(camera, size))
+    if camera.perspective:
+        ppu = ppu / np.maximum(np.linalg.norm(center - camera.eye[:3], axis=1) - radius, 1e-4)
+    level = np.full(len(scene), max(settings.forced_level, 0), np.int32)
+    if settings.forced_level < 0:
+        for k in range(1, levels):
+            ok = (level == k - 1) & (sc["lod_error"][:, k] * scale * ppu <= settings.max_error_px)
+            level[ok] = k
+    if settings.cull:
+        planes = frustum_planes(camera.proj @ camera.view)
+        inside = np.all(center @ planes[:, :3].T + planes[:, 3] >= -radius[:, None], axis=1)
+        level[~inside | (2.0 * radius * ppu < settings.min_pixels)] = -1
+    return level
+
+
+def scene_camera(scene: Scene, size: tuple[int, int], view: str = "three-quarter") -> Camera:
+    """A camera for ``view``: the standard views frame the scene's bounding box; ``ground`` stands
+    at the edge of the scene at 60 % of its height, looking across it (a walker's view, where
+    leaves span from a few pixels to the whole image)."""
+    import pyrr
+
+    if view not in SCENE_VIEWS:
+        raise ValueError(f"unknown view {view!r} (choose from {', '.join(SCENE_VIEWS)})")
+    lo, hi = scene.bounds()
+    if view != "ground":
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        return frame_view(view, corners, size)
+    center = (lo + hi) / 2
+    extent = hi - lo
+    eye = np.array([center[0], lo[1] - 0.15 * extent[1], lo[2] + 0.6 * extent[2]])
+    target = np.array([center[0], center[1], lo[2] + 0.35 * extent[2]])
+    far = float(np.linalg.norm(extent)) * 2 + 10.0
+    view_m = pyrr.matrix44.create_look_at(eye, target, np.array([0.0, 0.0, 1.0]), dtype=np.float64).T
+    proj = pyrr.matrix44.create_perspective_projection(50.0, size[0] / size[1], 0.05, far, dtype=np.float64).T
+    return Camera(view_m, proj, np.array([*eye, 1.0]), True)
+
+
+# -- GPU ----------------------------------------------------------------------------------------
+class _SceneBatch:
+    """GL objects of one batch of leaves: rows, species ids, the per-level visible lists, the
+    draw commands and the vertex array that reads them."""
+
+    def __init__(self, owner: "SceneRenderer", start: int, stop: int) -> None:
+        ctx = owner.ctx
+        self.start, self.count = start, stop - start
+        self.objects: list[Any] = []
+        rows = pack_scene(owner.scene, start, stop, owner.species_records)
+        self.rows = self._own(ctx.buffer(rows.tobytes()))
+        del rows
+        owner.prepare.run(self.rows, self.count)
+        self.species_of = self._own(ctx.buffer(owner.scene.species_id[start:stop].astype(np.uint32).tobytes()))
+        levels = len(owner.grids)
+        self.visible = self._own(ctx.buffer(reserve=4 * self.count * levels))
+        self.reset = np.zeros(levels, DRAW_COMMAND_DTYPE)
+        self.reset["count"] = owner.index_counts
+        self.reset["first_index"] = owner.first_index
+        self.reset["base_vertex"] = owner.base_vertex
+        self.reset["base_instance"] = np.arange(levels) * self.count
+        self.commands = self._own(ctx.buffer(self.reset.tobytes()))
+        self.vao = self._own(ctx.vertex_array(owner.program, [(owner.uv_vbo, "2f", "in_uv"),
+                                                              (self.visible, "1u/i", "in_leaf")],
+                                              index_buffer=owner.ibo, index_element_size=4))
+
+    def _own(self, obj: Any) -> Any:
+        self.objects.append(obj)
+        return obj
+
+    def release(self) -> None:
+        while self.objects:
+            self.objects.pop().release()
+
+
+class SceneRenderer:
+    """Draws a :class:`~leafview.model.scene.Scene` with GPU culling and LOD.
+
+    Parameters
+    ----------
+    ctx: moderngl context (OpenGL 4.5).
+    scene: the expanded scene.
+    grids: (nu, nv) of each level of detail, finest first (2-4 levels).
+    max_block_bytes: storage-block size per batch (default: the context's
+        ``GL_MAX_SHADER_STORAGE_BLOCK_SIZE``; smaller values force batching, for tests).
+    progress: called with the number of leaves uploaded after each batch (progress bars).
+
+    Raises :class:`SceneLimitError` when the rows cannot fit the context's limits; checks
+    ``ctx.error`` after allocating so an out-of-memory is reported, not ignored.
+    """
+
+    def __init__(self, ctx: moderngl.Context, scene: Scene, *, grids: Sequence[tuple[int, int]] = LOD_GRIDS,
+                 max_block_bytes: int | None = None, progress: Callable[[int], None] | None = None) -> None:
+        self.ctx, self.scene = ctx, scene
+        self.grids = tuple(tuple(g) for g in grids)
+        if not 1 <= len(self.grids) <= 4:
+            raise ValueError("between 1 and 4 levels of detail")
+        self.objects: list[Any] = []
+        self.batches: list[_SceneBatch] = []
+        try:
+            limit = int(ctx.info["GL_MAX_SHADER_STORAGE_BLOCK_SIZE"])
+            if max_block_bytes is not None:
+                limit = min(limit, int(max_block_bytes))
+            groups = int(ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])
+            self.plan = plan_batches(len(scene), limit, groups)
+            self.species_records, table, keys = species_tables(scene)
+            self.cull_rows = species_cull(scene, self.grids)
+            defines = {"LEAF_INDIRECT": 1, **feature_defines(self.species_records)}
+            self.program = self._own(build_program(ctx, "leaf.vert", "leaf.frag", defines=defines,
+                                                   varyings=("v_object", "v_object_normal")))
+            self.program["Frame"].binding = FRAME_BINDING
+            self.cull = self._own(build_compute(ctx, "scene_cull.comp"))
+            self.prepare = self._own(LeafPrepare(ctx))
+            self.ripples = self._own(RipplePass(ctx))
+            self.ripples.update(keys)
+            self.jitter_tex = self._own(ctx.texture((table.shape[1], table.shape[0]), 1, table.tobytes(), dtype="f4"))
+            self.jitter_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self.species_ssbo = self._own(ctx.buffer(self.cull_rows.tobytes()))
+            self.frame_ubo = self._own(ctx.buffer(reserve=FRAME_BLOCK.nbytes))
+            self._frame = FRAME_BLOCK.zeros()
+            # every level's grid in one vertex and one index buffer
+            uvs, idx, self.first_index, self.base_vertex, self.index_counts = [], [], [], [], []
+            nverts = nidx = 0
+            for nu, nv in self.grids:
+                tri = grid_indices(nu, nv).ravel()
+                self.first_index.append(nidx)
+                self.base_vertex.append(nverts)
+                self.index_counts.append(tri.size)
+                uvs.append(grid_uv(nu, nv))
+                idx.append(tri)
+                nverts += nu * nv
+                nidx += tri.size
+            self.uv_vbo = self._own(ctx.buffer(np.concatenate(uvs).astype(np.float32).tobytes()))
+            self.ibo = self._own(ctx.buffer(np.concatenate(idx).astype(np.uint32).tobytes()))
+            self.stems = self._make_stems(scene.stems)
+            for start, stop in self.plan:
+                self.batches.append(_SceneBatch(self, start, stop))
+                err = ctx.error
+                if err != "GL_NO_ERROR":
+                    raise SceneLimitError(f"allocating leaves {start}..{stop} of {len(scene)} failed with {err} "
+                                          f"({(stop - start) * LEAF_BLOCK.nbytes:,} bytes of rows)")
+                if progress is not None:
+                    progress(stop - start)
+        except BaseException:
+            self.release()
+            raise
+
+    def _own(self, obj: Any) -> Any:
+        self.objects.append(obj)
+        return obj
+
+    def _make_stems(self, stems: Any) -> Any:
+        if stems is None or len(stems[2]) == 0:
+            return None
+        pos, nrm, tris = stems
+        n = len(pos)
+        vdt = np.dtype([("p", "<f4", 3), ("n", "<f4", 3), ("uv", "<f4", 2), ("front", "u1", 4), ("back", "u1", 4)])
+        verts = np.zeros(n, vdt)
+        verts["p"], verts["n"], verts["uv"] = pos, nrm, (1.0, 0.5)  # u = 1: no midrib band
+        verts["front"] = np.round(np.asarray(STEM_FRONT) * 255)
+        verts["back"][:, :3] = np.round(np.asarray(STEM_BACK) * 255)
+        prog = self._own(build_program(self.ctx, "leaf_baked.vert", "leaf.frag"))
+        prog["Frame"].binding = FRAME_BINDING
+        vbo = self._own(self.ctx.buffer(verts.tobytes()))
+        ibo = self._own(self.ctx.buffer(np.asarray(tris, np.uint32).tobytes()))
+        return self._own(self.ctx.vertex_array(prog, [(vbo, "3f 3f 2f 4f1 4f1", "in_position", "in_normal",
+                                                       "in_uv", "in_front", "in_back")],
+                                               index_buffer=ibo, index_element_size=4))
+
+    # -- per frame ---------------------------------------------------------------------------
+    def set_camera(self, camera: Camera, size: tuple[int, int], *, srgb: bool = True,
+                   lighting: type[Lighting] = Lighting) -> None:
+        self.camera, self.size = camera, (int(size[0]), int(size[1]))
+        fill_frame(self._frame, camera, srgb=srgb, lighting=lighting)
+        self.frame_ubo.write(self._frame.tobytes())
+
+    def _cull(self, batch: _SceneBatch, settings: CullSettings) -> None:
+        batch.commands.write(batch.reset.tobytes())
+        cam = self.camera
+        planes = frustum_planes(cam.proj @ cam.view).astype(np.float32)
+        s = self.cull
+        s["count"] = batch.count
+        s["planes"].write(planes.tobytes())
+        s["eye"] = tuple(float(x) for x in (cam.eye if cam.perspective else (*cam.eye[:3], 0.0)))
+        s["pixel_scale"] = _pixel_scale(cam, self.size)
+        s["min_pixels"] = settings.min_pixels
+        s["max_error_px"] = settings.max_error_px
+        s["levels"] = len(self.grids)
+        s["forced_level"] = settings.forced_level
+        s["frustum"] = settings.cull
+        batch.rows.bind_to_storage_buffer(LEAVES_BINDING)
+        batch.species_of.bind_to_storage_buffer(SPECIES_OF_BINDING)
+        self.species_ssbo.bind_to_storage_buffer(SPECIES_BINDING)
+        batch.commands.bind_to_storage_buffer(COMMANDS_BINDING)
+        batch.visible.bind_to_storage_buffer(VISIBLE_BINDING)
+        s.run(group_x=-(-batch.count // _LOCAL))
+        self.ctx.memory_barrier(moderngl.COMMAND_BARRIER_BIT | moderngl.VERTEX_ATTRIB_ARRAY_BARRIER_BIT
+                                | moderngl.SHADER_STORAGE_BARRIER_BIT)
+
+    def draw(self, settings: CullSettings = CullSettings()) -> None:
+        """Cull and draw every batch (and the stems) into the bound framebuffer."""
+        self.ctx.enable_only(moderngl.DEPTH_TEST)
+        self.frame_ubo.bind_to_uniform_block(FRAME_BINDING)
+        if self.stems is not None:
+            self.stems.render(moderngl.TRIANGLES)
+        self.jitter_tex.use(location=0)
+        self.ripples.bind()
+        for batch in self.batches:
+            self._cull(batch, settings)
+            batch.rows.bind_to_storage_buffer(LEAVES_BINDING)
+            batch.vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=len(self.grids))
+
+    def level_counts(self) -> NDArray[np.int64]:
+        """Leaves drawn at each level in the last :meth:`draw` (reads the commands back)."""
+        total = np.zeros(len(self.grids), np.int64)
+        for batch in self.batches:
+            total += np.frombuffer(batch.commands.read(), DRAW_COMMAND_DTYPE)["instance_count"]
+        return total
+
+    def levels(self) -> NDArray[np.int32]:
+        """Each leaf's level in the last :meth:`draw` (-1: culled), read back from the lists."""
+        out = np.full(len(self.scene), -1, np.int32)
+        for batch in self.batches:
+            counts = np.frombuffer(batch.commands.read(), DRAW_COMMAND_DTYPE)["instance_count"]
+            vis = np.frombuffer(batch.visible.read(), np.uint32)
+            for k, c in enumerate(counts):
+                out[batch.start + vis[k * batch.count:k * batch.count + int(c)]] = k
+        return out
+
+    def triangles(self) -> int:
+        """Leaf triangles drawn in the last :meth:`draw`."""
+        per = np.array([2 * (nu - 1) * (nv - 1) for nu, nv in self.grids])
+        return int(self.level_counts() @ per)
+
+    def capture(self, leaves: Sequence[int], level: int = 0) -> NDArray[np.float32]:
+        """Leaf-space positions that ``leaf.vert`` computes for the given leaves at ``level``'s
+        grid (transform feedback of the drawing program): (len(leaves), nu·nv, 3). A
+        framebuffer must be bound."""
+        nu, nv = self.grids[level]
+        out_rows = []
+        self.jitter_tex.use(location=0)
+        self.ripples.bind()
+        self.frame_ubo.bind_to_uniform_block(FRAME_BINDING)
+        for i in leaves:
+            b = next(b for b in self.batches if b.start <= i < b.start + b.count)
+            b.rows.bind_to_storage_buffer(LEAVES_BINDING)
+            ids = self.ctx.buffer(np.array([i - b.start], np.uint32).tobytes())
+            out = self.ctx.buffer(reserve=nu * nv * 24)
+            uv = self.ctx.buffer(grid_uv(nu, nv).tobytes())
+            vao = self.ctx.vertex_array(self.program, [(uv, "2f", "in_uv"), (ids, "1u/i", "in_leaf")])
+            try:
+                vao.transform(out, mode=moderngl.POINTS, vertices=nu * nv, instances=1)
+                out_rows.append(np.frombuffer(out.read(), np.float32).reshape(nu * nv, 6)[:, :3].copy())
+            finally:
+                for obj in (vao, uv, out, ids):
+                    obj.release()
+        return np.stack(out_rows)
+
+    def render(self, camera: Camera, size: tuple[int, int], settings: CullSettings = CullSettings(), *,
+               samples: int = 4, background: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+               ) -> NDArray[np.uint8]:
+        """One frame offscreen: (h, w, 4) uint8 straight-alpha RGBA, row 0 at the top."""
+        ctx = self.ctx
+        objs: list[Any] = []
+        try:
+            color = ctx.renderbuffer(size, 4); objs.append(color)
+            depth = ctx.depth_renderbuffer(size); objs.append(depth)
+            fbo = ctx.framebuffer([color], depth); objs.append(fbo)
+            draw_fbo = fbo
+            if samples:
+                mc = ctx.renderbuffer(size, 4, samples=samples); objs.append(mc)
+                md = ctx.depth_renderbuffer(size, samples=samples); objs.append(md)
+                draw_fbo = ctx.framebuffer([mc], md); objs.append(draw_fbo)
+            draw_fbo.use()
+            ctx.viewport = (0, 0, *size)
+            draw_fbo.clear(*background, depth=1.0)
+            self.set_camera(camera, size)
+            self.draw(settings)
+            if draw_fbo is not fbo:
+                ctx.copy_framebuffer(fbo, draw_fbo)
+            image = read_rgba(fbo)
+            check_error(ctx, "scene frame")
+            return image
+        finally:
+            ctx.detect_framebuffer(0).use()
+            while objs:
+                objs.pop().release()
+
+    def release(self) -> None:
+        """Release every GL object (idempotent)."""
+        while self.batches:
+            self.batches.pop().release()
+        while self.objects:
+            obj = self.objects.pop()
+            obj.release()
+
+    def __enter__(self) -> "SceneRenderer":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def single_leaf_scene(params: Any) -> Scene:
+    """A one-leaf :class:`Scene` at the origin (no variation): for LOD measurements."""
+    from ..model.scene import SceneSpec
+
+    spec = SceneSpec(species=(params,), leaves=1, variation=0.0, colour_variation=0.0, stems=False)
+    sp = (params.replace(transform=type(params.transform)()),)
+    return Scene(spec, sp, np.zeros(1, np.int32), np.ones((1, 21), np.float32), np.ones(1, np.float32),
+                 np.eye(4)[None], None, None)
+
+
+def lod_switch_error(ctx: moderngl.Context, presets: Sequence[str], settings: CullSettings = CullSettings(),
+                     grids: Sequence[tuple[int, int]] = LOD_GRIDS) -> float:
+    """Largest outline change, in pixels, when a leaf switches level: each preset's leaf is drawn
+    top-down at the exact size where the culling pass switches it from level k to k + 1, once at
+    each level (no MSAA), and the Hausdorff distance between the two coverage masks is taken."""
+    from scipy.ndimage import distance_transform_edt
+
+    from ..model.params import LeafParams
+    from ..resources import resolve_preset
+
+    worst = 0.0
+    for name in presets:
+        params = LeafParams.load(resolve_preset(name))
+        scene = single_leaf_scene(params)
+        with SceneRenderer(ctx, scene, grids=grids) as r:
+            for k in range(1, len(grids)):
+                err = float(r.cull_rows[0]["lod_error"][k])
+                if err <= 0:
+                    continue
+                ppu = settings.max_error_px / err * (1.0 + 1e-6)   # pixels per leaf length at the switch
+                pts = evaluate(params, *grid_uv(33, 65).astype(np.float64).T)
+                lo, hi = pts.min(axis=0), pts.max(axis=0)
+                w, h = (int(np.ceil((hi[i] - lo[i]) * ppu)) + 8 for i in (0, 1))
+                if max(w, h) > 4096:
+                    continue  # switch happens above any image size we draw single leaves at
+                import pyrr
+
+                view_m = np.eye(4)
+                view_m[:3, 3] = (-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -(hi[2] + 1.0))
+                proj = pyrr.matrix44.create_orthogonal_projection(-w / (2 * ppu), w / (2 * ppu), -h / (2 * ppu),
+                                                                  h / (2 * ppu), 0.01, hi[2] - lo[2] + 2.0,
+                                                                  dtype=np.float64).T
+                cam = Camera(view_m, proj, np.array([0.0, 0.0, -1.0, 0.0]), False)
+                masks = []
+                for level in (k - 1, k):
+                    img = r.render(cam, (w, h), CullSettings(level=level), samples=0)
+                    masks.append(img[..., 3] > 127)
+                a, b = masks
+                if a.any() and b.any():
+                    da, db = distance_transform_edt(~a), distance_transform_edt(~b)
+                    worst = max(worst, float(da[b].max()), float(db[a].max()))
+    return worst

@@ -1,0 +1,172 @@
+"""``leafview scene``: build a scene of many leaves, render it offscreen, save it, or view it.
+
+Examples::
+
+    leafview scene --leaves 20000 --species ovate,lanceolate --seed 3 -o field.png
+    leafview scene --layout plant --leaves 3000 --save tree.toml
+    leafview scene tree.toml -o tree.png --camera ground --size 1280x720
+    leafview scene tree.toml --view            # interactive window
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from .errors import UsageError
+from .model.scene import LAYOUTS, MAX_LEAVES, SceneSpec
+
+__all__ = ["add_arguments", "run", "spec_from_args"]
+
+
+def _count(text: str) -> int:
+    try:
+        n = int(float(text)) if "e" in text.lower() else int(text.replace("_", ""))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of leaves, got {text!r}") from None
+    if not 1 <= n <= MAX_LEAVES:
+        raise argparse.ArgumentTypeError(f"leaf count must be in 1..{MAX_LEAVES:,}, got {n:,}")
+    return n
+
+
+def _fraction(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not 0.0 <= x <= 0.5:
+        raise argparse.ArgumentTypeError(f"must be in [0, 0.5], got {x}")
+    return x
+
+
+def _image_size(text: str) -> tuple[int, int]:
+    from .cli import int_pair
+
+    return int_pair(text, lo=16, hi=8192, what="WxH", example="1280x720")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    from .gpu.scene import SCENE_VIEWS
+
+    p.description = ("Build a scene of many leaves (one plant, a field or a hedge; species from presets, "
+                     "each leaf varied), then render it offscreen with GPU culling and level of detail, "
+                     "save it as a scene file, export it, or open it in a window.")
+    p.add_argument("scene", nargs="?", metavar="SCENE", help="a scene file (.toml/.json) to load; "
+                   "options given on the command line override its settings")
+    p.add_argument("--leaves", type=_count, help="number of leaves (default 10000, or the file's)")
+    p.add_argument("--species", help="comma-separated presets (names or files), e.g. ovate,lanceolate")
+    p.add_argument("--layout", choices=LAYOUTS, help="one plant, a field of plants or a hedge (default field)")
+    p.add_argument("--seed", type=int, help="random seed (default 0): the same seed gives the same scene")
+    p.add_argument("--plants", type=int, help="number of plants (default: from the leaf count)")
+    p.add_argument("--variation", type=_fraction, help="± fraction each leaf's shape varies (default 0.2)")
+    p.add_argument("--no-stems", action="store_true", help="leaves only, no branches")
+    p.add_argument("-o", "--output", metavar="IMAGE", help="render to this image (.png, .tif, .exr)")
+    p.add_argument("--size", type=_image_size, default=(1024, 768), metavar="WxH", help="image size (default 1024x768)")
+    p.add_argument("--camera", choices=SCENE_VIEWS, default="three-quarter", help="camera (default three-quarter)")
+    p.add_argument("--no-cull", action="store_true", help="draw every leaf (no frustum or size culling)")
+    p.add_argument("--no-lod", action="store_true", help="every leaf at the finest grid")
+    p.add_argument("--save", metavar="FILE", help="write the scene file (.toml or .json)")
+    p.add_argument("--export", metavar="FILE", help="bake the scene to a mesh file (.glb, .gltf, .usda, .usdc)")
+    p.add_argument("--view", action="store_true", help="open the scene in a window")
+    p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+
+
+def spec_from_args(args: argparse.Namespace) -> SceneSpec:
+    """The scene recipe: the file's (if any) with command-line overrides; raises ParamError."""
+    from .model.params import LeafParams
+    from .model.scene import load_scene
+    from .resources import builtin_presets, resolve_preset
+
+    if args.scene:
+        spec = load_scene(args.scene)
+    else:
+        spec = SceneSpec(species=(LeafParams.load(builtin_presets()["ovate"]),), name="scene")
+    changes: dict[str, Any] = {}
+    if args.species:
+        species = []
+        for name in (s.strip() for s in args.species.split(",")):
+            path = resolve_preset(name)
+            if not name or not path.exists():
+                raise UsageError(f"--species: {name!r} is not a preset file or built-in name "
+                                 f"(built-in: {', '.join(builtin_presets())})")
+            species.append(LeafParams.load(path))
+        changes.update(species=tuple(species), weights=())
+    for key in ("leaves", "layout", "seed", "plants", "variation"):
+        value = getattr(args, key)
+        if value is not None:
+            changes[key] = value
+    if args.no_stems:
+        changes["stems"] = False
+    return spec.replace(**changes) if changes else spec
+
+
+def _check_outputs(args: argparse.Namespace) -> None:
+    from .imaging import format_of
+
+    if not (args.output or args.save or args.export or args.view):
+        raise UsageError("nothing to do: give -o IMAGE, --save FILE, --export FILE or --view")
+    if args.output and format_of(Path(args.output)) is None:
+        raise UsageError(f"-o {args.output}: unknown image type (use .png, .tif or .exr)")
+    if args.save and Path(args.save).suffix.lower() not in (".toml", ".json"):
+        raise UsageError(f"--save {args.save}: use a .toml or .json file name")
+    for flag, value in (("-o", args.output), ("--save", args.save), ("--export", args.export)):
+        if value and Path(value).is_dir():
+            raise UsageError(f"{flag} {value} is a directory; give a file name")
+
+
+def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from .model.scene import build_scene, save_scene
+
+    _check_outputs(args)
+    spec = spec_from_args(args)       # every input is validated before anything is written
+    say = (lambda text: None) if args.quiet else print
+    t0 = time.perf_counter()
+    scene = build_scene(spec)
+    t_build = time.perf_counter() - t0
+    if args.save:
+        save_scene(spec, args.save)
+        say(f"wrote {args.save}: {len(scene):,} leaves, {len(spec.species)} species, seed {spec.seed}")
+    if args.export:
+        from .export import export_scene  # provided by the export package
+
+        export_scene(scene, args.export)
+        say(f"wrote {args.export}")
+    if args.output:
+        from .gpu import default_renderer
+        from .gpu.scene import CullSettings, SceneRenderer, scene_camera
+        from .imaging import write_image
+
+        ctx = default_renderer().ctx
+        bar = tqdm(total=len(scene), unit="leaf", unit_scale=True, desc="uploading", file=sys.stderr,
+                   disable=True if args.quiet else None, leave=False)
+        t1 = time.perf_counter()
+        try:
+            renderer = SceneRenderer(ctx, scene, progress=bar.update)
+        finally:
+            bar.close()
+        try:
+            t_upload = time.perf_counter() - t1
+            settings = CullSettings(cull=not args.no_cull, lod=not args.no_lod)
+            t2 = time.perf_counter()
+            image = renderer.render(scene_camera(scene, args.size, args.camera), args.size, settings)
+            t_frame = time.perf_counter() - t2
+            counts = renderer.level_counts()
+            tris = renderer.triangles()
+        finally:
+            renderer.release()
+        write_image(args.output, image, description=f"leafview scene: {len(scene):,} leaves, seed {spec.seed}")
+        drawn = int(counts.sum())
+        say(f"wrote {args.output} ({args.size[0]}×{args.size[1]}, {args.camera} camera): {len(scene):,} leaves, "
+            f"{drawn:,} drawn (levels {'/'.join(str(int(c)) for c in counts)}), {tris:,} triangles; "
+            f"build {t_build:.1f} s, upload {t_upload:.1f} s, frame {t_frame:.2f} s "
+            f"[{ctx.info['GL_RENDERER']}]")
+    if args.view:
+        from .app.scene_window import view_scene
+
+        return view_scene(scene, size=args.size)
+    return 0

@@ -1,0 +1,50 @@
+#version 450
+// GPU-driven culling and level of detail for scenes (leafview/gpu/scene.py). One invocation per
+// leaf: the leaf's bounding sphere (its species' leaf-space sphere, placed by the leaf's model
+// matrix) is tested against the six frustum planes and against a minimum projected size; a
+// visible leaf gets the coarsest (u, v) grid whose outline error stays under max_error_px pixels
+// and is appended to that level's list, whose draw command counts it. numpy reference:
+// leafview/gpu/scene.py, cull_reference().
+layout(local_size_x = 64) in;
+#include "generated/leaf_block.glsl"
+#include "generated/scene_blocks.glsl"
+
+layout(std430, binding = 2) readonly buffer Leaves { LeafData leaves[]; };
+layout(std430, binding = 4) readonly buffer SpeciesOf { uint species_of[]; };
+layout(std430, binding = 5) readonly buffer Species { SpeciesCull species[]; };
+layout(std430, binding = 6) buffer Commands { DrawCommand commands[]; };
+layout(std430, binding = 7) writeonly buffer Visible { uint visible[]; };
+
+uniform uint count;
+uniform vec4 planes[6];       // world-space planes, inside where dot(n, p) + d >= 0
+uniform vec4 eye;             // xyz camera position (w = 1) or view direction (w = 0, orthographic)
+uniform float pixel_scale;    // pixels per world unit at distance 1 (perspective) or anywhere (ortho)
+uniform float min_pixels;     // leaves whose sphere spans fewer pixels are dropped
+uniform float max_error_px;   // largest outline error allowed for a coarser level
+uniform int levels;           // number of levels of detail (grids)
+uniform int forced_level;     // >= 0: every visible leaf at this level (LOD off)
+uniform bool frustum;         // false: no frustum or size test (culling off)
+
+void main() {
+    uint i = gl_GlobalInvocationID.x;
+    if (i >= count) return;
+    SpeciesCull sc = species[species_of[i]];
+    mat4 m = leaves[i].model;
+    vec3 center = (m * vec4(sc.sphere.xyz, 1.0)).xyz;
+    float scale = length(m[0].xyz);
+    float radius = sc.sphere.w * scale;
+    float ppu = pixel_scale;
+    if (eye.w > 0.5) ppu = pixel_scale / max(distance(center, eye.xyz) - radius, 1e-4);
+    if (frustum) {
+        for (int k = 0; k < 6; ++k)
+            if (dot(planes[k].xyz, center) + planes[k].w < -radius) return;
+        if (2.0 * radius * ppu < min_pixels) return;
+    }
+    int level = forced_level;
+    if (level < 0) {
+        level = 0;
+        while (level + 1 < levels && sc.lod_error[level + 1] * scale * ppu <= max_error_px) ++level;
+    }
+    uint slot = atomicAdd(commands[level].instance_count, 1u);
+    visible[commands[level].base_instance + slot] = i;
+}
