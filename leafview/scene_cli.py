@@ -70,7 +70,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-lod", action="store_true", help="every leaf at the finest grid")
     p.add_argument("--save", metavar="FILE", help="write the scene file (.toml or .json)")
     p.add_argument("--export", metavar="FILE", help="bake the scene to a mesh file (.glb, .gltf, .usda, .usdc)")
-    p.add_argument("--view", action="store_true", help="open the scene in a window")
+    p.add_argument("--view", action="store_true", help="open the scene in a window (orbit, culling/LOD panel)")
+    p.add_argument("--frames", type=int, metavar="N", help="with --view: draw N frames, then close (scripted runs)")
+    p.add_argument("--screenshot", metavar="IMAGE", help="with --view: write the window after the last frame")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
 
 
@@ -108,6 +110,10 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
     if not (args.output or args.save or args.export or args.view):
         raise UsageError("nothing to do: give -o IMAGE, --save FILE, --export FILE or --view")
+    if (args.frames is not None or args.screenshot) and not args.view:
+        raise UsageError("--frames and --screenshot go with --view")
+    if args.frames is not None and args.frames < 1:
+        raise UsageError(f"--frames must be at least 1, got {args.frames}")
     if args.output and format_of(Path(args.output)) is None:
         raise UsageError(f"-o {args.output}: unknown image type (use .png, .tif or .exr)")
     if args.save and Path(args.save).suffix.lower() not in (".toml", ".json"):
@@ -166,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
             f"build {t_build:.1f} s, upload {t_upload:.1f} s, frame {t_frame:.2f} s "
             f"[{ctx.info['GL_RENDERER']}]")
     if args.view:
-        from .app.scene_window import view_scene
+        from .app.scene_view import view_scene
 
-        return view_scene(scene, size=args.size)
+        return view_scene(scene, size=args.size, frames=args.frames, screenshot=args.screenshot)
     return 0

@@ -197,3 +197,19 @@ def test_window_session_edits_undo_resize_and_close(gl, display, tmp_path):
     assert out["asking"] == [True, True, False]  # still open, asking, not closed behind its back
     assert out["closed"]
     assert not list(tmp_path.iterdir())  # nothing written: no imgui.ini, no stray files
+
+
+def test_scene_window_scripted_run(gl, display, tmp_path):
+    """``leafview scene --view`` hosts the scene viewer in the same window class."""
+    out = tmp_path / "scene_window.png"
+    exe = shutil.which("leafview") or sys.executable
+    result = _run([exe, "scene", "--leaves", "800", "--layout", "plant", "--view", "--frames", "4",
+                   "--screenshot", str(out), "--size", "800x500"], display, tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "4 frames" in result.stdout
+    image, _ = read_image(out)
+    assert image.shape == (500, 800, 4)
+    scene_part = image[:, :500, :3].astype(int)
+    # leaves (green dominant) cover part of the viewport, the sky the rest
+    green = (scene_part[..., 1] > scene_part[..., 0] + 10) & (scene_part[..., 1] > scene_part[..., 2] + 10)
+    assert 0.02 < green.mean() < 0.9

@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import glfw
 import moderngl
@@ -38,8 +38,9 @@ class ViewerWindow:
     display or no OpenGL 4.5.
     """
 
-    def __init__(self, state: ViewerState, size: tuple[int, int] = (1280, 800), *, dev: bool = False,
-                 samples: int | None = None, title: str = "leafview") -> None:
+    def __init__(self, state: ViewerState | None, size: tuple[int, int] = (1280, 800), *, dev: bool = False,
+                 samples: int | None = None, title: str = "leafview",
+                 make_view: Callable[[moderngl.Context], Any] | None = None) -> None:
         self._errors: list[str] = []
         self.window: Any = None
         self.ctx: moderngl.Context | None = None
@@ -65,7 +66,8 @@ class ViewerWindow:
                 self.ctx = moderngl.create_context(require=450)
             except Exception as exc:
                 raise GLUnavailable(f"{NO_DISPLAY_HELP}\n  (moderngl: {exc})") from None
-            self.viewer = Viewer(self.ctx, state, dev=dev, samples=samples)
+            # the leaf editor, or another view with the same frame interface (the scene viewer)
+            self.viewer = make_view(self.ctx) if make_view else Viewer(self.ctx, state, dev=dev, samples=samples)
             self.input = GlfwInput(self.window)
             glfw.set_window_close_callback(self.window, self._on_close)
         except BaseException:

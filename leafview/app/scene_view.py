@@ -1,0 +1,234 @@
+"""The scene viewer without its window: orbit around a scene of many leaves, with a panel that
+shows what the culling pass drew at each level of detail and toggles culling and LOD live.
+
+:class:`SceneView` has the frame interface of :class:`~leafview.app.viewer.Viewer`, so
+:class:`~leafview.app.window.ViewerWindow` hosts it unchanged (``leafview scene --view``), and
+the tests drive it headless with injected imgui events.
+
+Mouse: left drag orbits, shift+left or middle drag pans, the wheel dollies. Keys: C culling,
+L level of detail, F frame the scene, Esc or Q quit.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import moderngl
+import numpy as np
+from imgui_bundle import imgui
+from numpy.typing import NDArray
+
+from ..gpu.scene import CullSettings, SceneRenderer
+from ..model.scene import Scene
+from .imgui_gl import ImguiRenderer
+from .orbit import OrbitCamera
+
+__all__ = ["SceneView", "view_scene"]
+
+PANEL_WIDTH = 300
+BACKGROUND = (0.62, 0.72, 0.80, 1.0)  # a pale sky behind the canopy
+
+
+class _Quit:
+    """What the window asks of ``viewer.files``: quitting needs no confirmation here."""
+
+    asking = False
+
+    def __init__(self) -> None:
+        self.quit_requested = False
+
+    def request_quit(self) -> None:
+        self.quit_requested = True
+
+
+class _State:
+    """What the window asks of ``viewer.state``: a title, no recoverable edits."""
+
+    error = None
+    params = None
+
+    def __init__(self, title: str) -> None:
+        self.title = title
+
+    def write_recovery(self) -> Path | None:
+        return None
+
+
+class SceneView:
+    """Scene + panel for one GL context (creates and releases its own imgui context)."""
+
+    def __init__(self, ctx: moderngl.Context, scene: Scene) -> None:
+        self.ctx, self.scene = ctx, scene
+        self.imgui_ctx = imgui.create_context()
+        imgui.get_io().set_ini_filename(None)
+        self.gui: ImguiRenderer | None = None
+        self.renderer: SceneRenderer | None = None
+        try:
+            self.gui = ImguiRenderer(ctx)
+            self.renderer = SceneRenderer(ctx, scene)
+        except BaseException:
+            self.release()
+            raise
+        self.settings = CullSettings()
+        self.files = _Quit()
+        self.state = _State(f"{scene.spec.name or 'scene'} ({len(scene):,} leaves)")
+        self.gl_renderer = str(ctx.info["GL_RENDERER"])
+        self.gl_errors: list[tuple[int, str]] = []
+        self.camera = OrbitCamera(target=np.zeros(3))
+        self._framed = False
+        self.frame_index = 0
+        self.fps = 0.0
+        self._dts: deque[float] = deque(maxlen=30)
+        self._drag: str | None = None
+        self._targets: list[Any] = []
+        self._size: tuple[int, int] | None = None
+        self.counts = np.zeros(len(self.renderer.grids), np.int64)
+
+    def _corners(self) -> NDArray[np.float64]:
+        lo, hi = self.scene.bounds()
+        return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+    # -- one frame ------------------------------------------------------------------------------
+    def frame(self, window_size: tuple[int, int], fb_size: tuple[int, int] | None = None,
+              dt: float = 1 / 60) -> moderngl.Framebuffer | None:
+        """Input, panel and one frame; the framebuffer holding it, or None when minimised."""
+        w, h = int(window_size[0]), int(window_size[1])
+        fw, fh = (w, h) if fb_size is None else (int(fb_size[0]), int(fb_size[1]))
+        if min(w, h, fw, fh) <= 0:
+            return None
+        io = imgui.get_io()
+        io.display_size = imgui.ImVec2(w, h)
+        io.display_framebuffer_scale = imgui.ImVec2(fw / w, fh / h)
+        io.delta_time = float(min(max(dt, 1e-4), 1.0))
+        scene_w = max(w - PANEL_WIDTH, 1)
+        if not self._framed:
+            self.camera.reset(self._corners(), scene_w / h)
+            self.camera.radius *= 2.0  # room to dolly out and a generous far plane
+            self._framed = True
+        imgui.new_frame()
+        self._input(io, scene_w, h)
+        self._panel(w, h)
+        imgui.render()
+        fbo = self._target(fw, fh)
+        fbo.use()
+        fbo.clear(*BACKGROUND, depth=1.0)
+        px_w = max(1, int(round(scene_w * fw / w)))
+        self.ctx.viewport = (0, 0, px_w, fh)
+        assert self.renderer is not None and self.gui is not None
+        self.renderer.set_camera(self.camera.camera(px_w, fh), (px_w, fh))
+        self.renderer.draw(self.settings)
+        self.counts = self.renderer.level_counts()
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        self.ctx.viewport = (0, 0, fw, fh)
+        self.gui.render(imgui.get_draw_data())
+        err = self.ctx.error
+        if err != "GL_NO_ERROR":
+            self.gl_errors.append((self.frame_index, err))
+        self.frame_index += 1
+        if self.frame_index > 1:
+            self._dts.append(io.delta_time)
+            self.fps = len(self._dts) / sum(self._dts)
+        return fbo
+
+    def _input(self, io: Any, scene_w: float, h: int) -> None:
+        def pressed(key: Any) -> bool:
+            return imgui.is_key_pressed(key, False) and not io.want_text_input
+
+        if pressed(imgui.Key.c):
+            self.settings = replace(self.settings, cull=not self.settings.cull)
+        if pressed(imgui.Key.l):
+            self.settings = replace(self.settings, lod=not self.settings.lod)
+        if pressed(imgui.Key.f):
+            self.camera.frame(self._corners(), scene_w / h)
+        if pressed(imgui.Key.escape) or pressed(imgui.Key.q):
+            self.files.request_quit()
+        mx, my = io.mouse_pos.x, io.mouse_pos.y
+        inside = 0 <= mx < scene_w and 0 <= my < h and not io.want_capture_mouse
+        if self._drag is None and inside:
+            if imgui.is_mouse_clicked(imgui.MouseButton_.left):
+                self._drag = "pan" if io.key_shift else "orbit"
+            elif imgui.is_mouse_clicked(imgui.MouseButton_.middle):
+                self._drag = "pan"
+            if io.mouse_wheel:
+                self.camera.dolly(float(io.mouse_wheel))
+        if self._drag is not None:
+            if not (imgui.is_mouse_down(imgui.MouseButton_.left) or imgui.is_mouse_down(imgui.MouseButton_.middle)):
+                self._drag = None
+            elif self._drag == "orbit":
+                self.camera.orbit(io.mouse_delta.x, io.mouse_delta.y)
+            else:
+                self.camera.pan(io.mouse_delta.x, io.mouse_delta.y, h)
+
+    def _panel(self, w: int, h: int) -> None:
+        assert self.renderer is not None
+        imgui.set_next_window_pos(imgui.ImVec2(w - PANEL_WIDTH, 0))
+        imgui.set_next_window_size(imgui.ImVec2(PANEL_WIDTH, h))
+        flags = imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse
+        imgui.begin("Scene", None, flags)
+        imgui.text(f"{len(self.scene):,} leaves, {len(self.scene.species)} species")
+        imgui.text(f"{len(self.renderer.batches)} batch(es), {self.fps:.1f} fps")
+        imgui.text(self.gl_renderer)
+        imgui.separator()
+        s = self.settings
+        changed, cull = imgui.checkbox("culling (C)", s.cull)
+        changed2, lod = imgui.checkbox("level of detail (L)", s.lod)
+        _, err = imgui.slider_float("max outline error (px)", s.max_error_px, 0.1, 8.0)
+        _, minpx = imgui.slider_float("smallest leaf (px)", s.min_pixels, 0.0, 8.0)
+        self.settings = replace(s, cull=cull, lod=lod, max_error_px=float(err), min_pixels=float(minpx))
+        imgui.separator()
+        total = int(self.counts.sum())
+        imgui.text(f"drawn: {total:,} of {len(self.scene):,}")
+        for (nu, nv), c in zip(self.renderer.grids, self.counts):
+            imgui.text(f"  {nu}×{nv} grid: {int(c):,}")
+        imgui.text(f"triangles: {self.renderer.triangles():,}")
+        imgui.end()
+
+    # -- framebuffers -------------------------------------------------------------------------------
+    def _target(self, w: int, h: int) -> moderngl.Framebuffer:
+        if self._size != (w, h):
+            self._release_targets()
+            color = self.ctx.renderbuffer((w, h), 4)
+            depth = self.ctx.depth_renderbuffer((w, h))
+            self._targets = [self.ctx.framebuffer([color], depth), color, depth]
+            self._size = (w, h)
+        return self._targets[0]
+
+    def _release_targets(self) -> None:
+        if self._targets:
+            self.ctx.detect_framebuffer(0).use()
+            for obj in self._targets:
+                obj.release()
+        self._targets, self._size = [], None
+
+    def read_frame(self) -> NDArray[np.uint8]:
+        """The last frame as (h, w, 4) uint8, row 0 at the top, opaque."""
+        if self._size is None:
+            raise RuntimeError("no frame has been drawn yet")
+        w, h = self._size
+        img = np.frombuffer(self._targets[0].read(components=4, alignment=1), np.uint8).reshape(h, w, 4)[::-1].copy()
+        img[..., 3] = 255
+        return img
+
+    def release(self) -> None:
+        self._release_targets()
+        if self.renderer is not None:
+            self.renderer.release()
+            self.renderer = None
+        if self.gui is not None:
+            self.gui.release()
+            self.gui = None
+        if self.imgui_ctx is not None:
+            imgui.destroy_context(self.imgui_ctx)
+            self.imgui_ctx = None
+
+
+def view_scene(scene: Scene, size: tuple[int, int] = (1280, 800), frames: int | None = None,
+               screenshot: str | Path | None = None) -> int:
+    """Open ``scene`` in a window (blocks until closed); returns the exit code."""
+    from .window import ViewerWindow
+
+    with ViewerWindow(None, size, title="leafview scene", make_view=lambda ctx: SceneView(ctx, scene)) as win:
+        return win.run(frames=frames, screenshot=screenshot)
