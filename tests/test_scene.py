@@ -18,6 +18,7 @@ from leafview.model.scene import SceneSpec, build_scene, evaluate_leaf, load_sce
 
 def _spec(presets, n=400, **kw) -> SceneSpec:
     kw.setdefault("seed", 5)
+    kw.setdefault("plants", 9)  # several plants, so every species appears
     return SceneSpec(species=(presets["ovate"], presets["lanceolate"], presets["maize"]), leaves=n, **kw)
 
 
