@@ -89,6 +89,20 @@ def _median_time(fn: Callable[[], Any], repeats: int, finish: Callable[[], None]
     return statistics.median(times)
 
 
+def bytes_per_leaf() -> dict[str, Any]:
+    """Bytes of a baked BYTES_GRID leaf mesh (f32 position, normal, uv; u32 indices) against the
+    leaf record: its host-set parameter fields, and the whole record with derived data."""
+    from .gpu.layout import LEAF_BLOCK
+
+    nu, nv = BYTES_GRID
+    verts, tri_count = nu * nv, 2 * (nu - 1) * (nv - 1)
+    baked = verts * (3 + 3 + 2) * 4 + tri_count * 3 * 4
+    return {"baked_bytes_per_leaf": baked, "param_bytes_per_leaf": LEAF_BLOCK.parameter_nbytes,
+            "record_bytes_per_leaf": LEAF_BLOCK.nbytes,
+            "baked_vs_param_bytes": baked / LEAF_BLOCK.parameter_nbytes,
+            "baked_vs_record_bytes": baked / LEAF_BLOCK.nbytes}
+
+
 def thumbnail_params(k: int) -> list[Any]:
     """``k`` distinct single leaves at the origin: plain, serrated, cupped, curved axis, …"""
     from .model.params import Jitter, LeafParams, Shape
@@ -204,7 +218,6 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
 
     from . import __version__
     from .gpu.context import check_error, create_headless_context
-    from .gpu.layout import LEAF_BLOCK
     from .gpu.renderer import LeafRenderer
 
     cfg = _CONFIG[bool(quick)]
@@ -271,15 +284,7 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
 
         # -- bytes per leaf ---------------------------------------------------------------------
         progress.step("bytes per leaf")
-        nu, nv = BYTES_GRID
-        verts, tri_count = nu * nv, 2 * (nu - 1) * (nv - 1)
-        res["baked_bytes_per_leaf"] = verts * (3 + 3 + 2) * 4 + tri_count * 3 * 4
-        # parameters: the record's host-set fields; derived fields (GPU constants, bend samples)
-        # are recomputed from them and reported separately as the full record size
-        res["param_bytes_per_leaf"] = LEAF_BLOCK.parameter_nbytes
-        res["record_bytes_per_leaf"] = LEAF_BLOCK.nbytes
-        res["baked_vs_param_bytes"] = res["baked_bytes_per_leaf"] / res["param_bytes_per_leaf"]
-        res["baked_vs_record_bytes"] = res["baked_bytes_per_leaf"] / res["record_bytes_per_leaf"]
+        res.update(bytes_per_leaf())
 
         # -- ripples: frame time with ÷ without, and the cost of re-running the fBm pass --------
         progress.step("ripples")

@@ -37,7 +37,7 @@ def _spec(n: int) -> Any:
 
 
 def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
-    from .benchmarks import _median_time, _Progress, _scene
+    from .benchmarks import _median_time, _Progress, _scene, bytes_per_leaf
     from .gpu.context import check_error, create_headless_context
     from .gpu.instanced import OffscreenTarget
     from .gpu.scene import CullSettings, SceneRenderer, lod_switch_error, scene_camera
@@ -86,10 +86,11 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
             progress.step("LOD switch")
             res["lod_switch_px"] = lod_switch_error(ctx, ("ovate", "lanceolate", "serrate", "maize"))
             progress.step("parameters vs baked mesh")
-            core = _scene(ctx, 300 if quick else 10_000, 2 if quick else 9, progress)
-            for key in ("param_vs_baked_speed", "baked_vs_param_bytes", "instanced_leaves_per_s",
-                        "baked_leaves_per_s", "scene_leaves", "triangles_per_leaf"):
-                res[key] = core[key]
+            n_pb = 300 if quick else 10_000
+            core = _scene(ctx, n_pb, 2 if quick else 9, progress)
+            res.update(param_vs_baked_speed=core["ratio"], param_vs_baked_range=list(core["ratio_range"]),
+                       instanced_leaves_per_s=n_pb / core["t_instanced"], baked_leaves_per_s=n_pb / core["t_baked"],
+                       scene_leaves=n_pb, triangles_per_leaf=core["triangles_per_leaf"], **bytes_per_leaf())
             if not quick:
                 progress.step("10⁶ leaves")
                 t0 = time.perf_counter()

@@ -4,7 +4,6 @@ rendered picture, batching at the storage-block limit and the ``leafview scene``
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -3,7 +3,6 @@ reports what the culling pass drew, and nothing leaks a GL error."""
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 from imgui_bundle import imgui
 

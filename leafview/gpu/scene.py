@@ -20,7 +20,6 @@ are split into batches automatically (:func:`plan_batches`).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
