@@ -95,8 +95,9 @@ def test_vectorised_rows_match_per_leaf_packing(small):
 def test_batches_respect_the_block_limit():
     from leafview.gpu.scene import SceneLimitError, plan_batches
 
+    per = (128 << 20) // LEAF_BLOCK.nbytes
     plan = plan_batches(1_000_000, 128 << 20)
-    assert plan[0] == (0, 262144) and plan[-1][1] == 1_000_000 and len(plan) == 4
+    assert plan[0] == (0, per) and plan[-1][1] == 1_000_000 and len(plan) == -(-1_000_000 // per)
     assert all(b - a <= (128 << 20) // LEAF_BLOCK.nbytes for a, b in plan)
     assert len(plan_batches(10_000, 1 << 30, max_groups=10)) == -(-10_000 // 640)
     with pytest.raises(SceneLimitError, match="GL_MAX_SHADER_STORAGE_BLOCK_SIZE = 100 bytes"):

@@ -245,8 +245,9 @@ def vary_shape(shape: Shape, factors: NDArray[np.floating]) -> Shape:
         g = f[6 + 3 * k: 9 + 3 * k]
         rows.append((float(np.clip(vb * g[0], 0.02, 0.98)), float(xs * g[1]), float(zs * g[2])))
     rows += [tuple(r) for r in shape.silhouette[3:]]
-    zf = tuple(float(x) for x in np.asarray(shape.zf) * f[15:18])
-    zg = tuple(float(x) for x in np.asarray(shape.zg) * f[18:21])
+    # rows beyond the paper's three (an extended silhouette) keep their species' values
+    zf = tuple(float(x) for x in np.asarray(shape.zf[:3]) * f[15:18]) + tuple(shape.zf[3:])
+    zg = tuple(float(x) for x in np.asarray(shape.zg[:3]) * f[18:21]) + tuple(shape.zg[3:])
     return replace(shape, a1=a1, a2=a2, silhouette=tuple(rows), zf=zf, zg=zg)
 
 
