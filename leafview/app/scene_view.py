@@ -25,6 +25,7 @@ from ..gpu.scene import CullSettings, SceneRenderer
 from ..model.scene import Scene
 from .imgui_gl import ImguiRenderer
 from .orbit import OrbitCamera
+from .viewer import begin_io
 
 __all__ = ["SceneView", "view_scene"]
 
@@ -95,14 +96,11 @@ class SceneView:
     def frame(self, window_size: tuple[int, int], fb_size: tuple[int, int] | None = None,
               dt: float = 1 / 60) -> moderngl.Framebuffer | None:
         """Input, panel and one frame; the framebuffer holding it, or None when minimised."""
-        w, h = int(window_size[0]), int(window_size[1])
-        fw, fh = (w, h) if fb_size is None else (int(fb_size[0]), int(fb_size[1]))
-        if min(w, h, fw, fh) <= 0:
+        sizes = begin_io(window_size, fb_size, dt)
+        if sizes is None:
             return None
+        w, h, fw, fh = sizes
         io = imgui.get_io()
-        io.display_size = imgui.ImVec2(w, h)
-        io.display_framebuffer_scale = imgui.ImVec2(fw / w, fh / h)
-        io.delta_time = float(min(max(dt, 1e-4), 1.0))
         scene_w = max(w - PANEL_WIDTH, 1)
         if not self._framed:
             self.camera.reset(self._corners(), scene_w / h)

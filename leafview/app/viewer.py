@@ -49,6 +49,21 @@ def is_software(gl_renderer: str) -> bool:
     return any(s in name for s in ("llvmpipe", "softpipe", "swiftshader", "software"))
 
 
+def begin_io(window_size: tuple[int, int], fb_size: tuple[int, int] | None,
+             dt: float) -> tuple[int, int, int, int] | None:
+    """Tell imgui this frame's window and framebuffer sizes and time step; returns
+    ``(w, h, fb_w, fb_h)``, or None when the window is minimised (nothing is drawn then)."""
+    w, h = int(window_size[0]), int(window_size[1])
+    fw, fh = (w, h) if fb_size is None else (int(fb_size[0]), int(fb_size[1]))
+    if min(w, h, fw, fh) <= 0:
+        return None
+    io = imgui.get_io()
+    io.display_size = imgui.ImVec2(w, h)
+    io.display_framebuffer_scale = imgui.ImVec2(fw / w, fh / h)
+    io.delta_time = float(min(max(dt, 1e-4), 1.0))
+    return w, h, fw, fh
+
+
 @lru_cache(maxsize=8)
 def _lighting(direction: tuple[float, float, float]) -> type[Lighting]:
     """The renderer's lights with the key light moved to ``direction`` (towards the light)."""
@@ -140,14 +155,11 @@ class Viewer:
               dt: float = 1 / 60) -> moderngl.Framebuffer | None:
         """Run the UI and draw one frame; returns the framebuffer holding it (window size in
         pixels), or None when the window is minimised (0 × 0): nothing is drawn then."""
-        w, h = int(window_size[0]), int(window_size[1])
-        fw, fh = (w, h) if fb_size is None else (int(fb_size[0]), int(fb_size[1]))
-        if min(w, h, fw, fh) <= 0:
+        sizes = begin_io(window_size, fb_size, dt)
+        if sizes is None:
             return None
+        w, h, fw, fh = sizes
         io = imgui.get_io()
-        io.display_size = imgui.ImVec2(w, h)
-        io.display_framebuffer_scale = imgui.ImVec2(fw / w, fh / h)
-        io.delta_time = float(min(max(dt, 1e-4), 1.0))
         self._poll_shaders()
         scene_w, _ = self.layout(w)
         if self._framed_loads != self.state.loads:
