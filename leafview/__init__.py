@@ -29,6 +29,8 @@ def __getattr__(name: str) -> Any:
         return importlib.import_module(".model.edits", __name__)
     if name == "beam":
         return importlib.import_module(".beam", __name__)
+    if name == "shapes_params":
+        return importlib.import_module(".shapes", __name__).shapes_params
     if name == "fbm_noise":
         return importlib.import_module(".model.fbm", __name__).fbm_noise
     raise AttributeError(f"module 'leafview' has no attribute {name!r}")

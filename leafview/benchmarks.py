@@ -462,7 +462,9 @@ def format_table(res: dict[str, Any]) -> str:
 # JSON-able dict with ``gl_renderer``; ``table(res)`` the readable report. "core" is this module.
 SUITES: dict[str, tuple[str, str, str]] = {
     "core": ("leafview.benchmarks", "run", "format_table"),
+    "export": ("leafview.export.bench", "run", "format_table"),
     "scene": ("leafview.scene_bench", "run", "format_table"),
+    "shapes": ("leafview.shapes.bench", "run", "format_table"),
 }
 
 

@@ -24,7 +24,9 @@ _VIEWS = ("top", "front", "three-quarter", "side")
 # ``add_arguments(parser)`` and ``run(args) -> int``; it raises UsageError / ParamError for bad
 # input (exit 2) and writes no partial file.
 COMMANDS: dict[str, tuple[str, str]] = {
+    "export": ("leafview.export.cli", "bake leaves or a scene into .glb/.gltf/.obj/.ply/.usda/.usdc"),
     "scene": ("leafview.scene_cli", "render, save, export or view a scene of many leaves"),
+    "shapes": ("leafview.shapes.cli", "list or render the botanical shape catalogue, or a multilobed leaf"),
 }
 
 

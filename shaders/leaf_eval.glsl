@@ -99,6 +99,51 @@ void apply_bend(float v, vec3 Av, vec3 dAv, inout LeafEval e) {
     e.Luv = Luv;
 }
 
+// Extended silhouette (leafview/model/params.py): N rows, S, F and G of degree n = N + 1, rows
+// possibly tilted. Same rearrangement as below with degree-n Bernstein weights, plus the tilt
+// curve T(v) = sum_i w_i T_i (T_i = -x̄s_i sin φ_i t(v̄_i), side-independent), which the cubic
+// cross-section's linear precision turns into + |u| T(v). Rows 1-3 are read from axis/heights,
+// rows 4..N from sil_axis/sil_heights, the T_i from sil_tilt (all written by leaf_prepare.comp).
+void ext_silhouette(int rows, float v, out vec3 Pv, out vec3 Qv, out vec3 dPv, out vec3 dQv,
+                    out vec3 z, out vec3 dz, out vec2 Tv, out vec2 dTv) {
+    int n = rows + 1;
+    float t = 1.0 - v;
+    float pv[SIL_MAX_ROWS + 2], pt[SIL_MAX_ROWS + 2];  // v^k and (1 - v)^k, k = 0..n
+    pv[0] = 1.0;
+    pt[0] = 1.0;
+    for (int k = 1; k <= n; ++k) {
+        pv[k] = pv[k - 1] * v;
+        pt[k] = pt[k - 1] * t;
+    }
+    Pv = pv[n] * LEAF_APEX;
+    dPv = float(n) * pv[n - 1] * LEAF_APEX;
+    Qv = vec3(0.0); dQv = vec3(0.0); z = vec3(0.0); dz = vec3(0.0); Tv = vec2(0.0); dTv = vec2(0.0);
+    int c = 1;   // C(n, i)
+    int cm = 1;  // C(n - 1, i - 1)
+    for (int i = 1; i < n; ++i) {
+        c = c * (n - i + 1) / i;
+        int cn = cm * (n - i) / i;  // C(n - 1, i)
+        float w = float(c) * pv[i] * pt[n - i];
+        // d/dv of the degree-n Bernstein weight: n (B^{n-1}_{i-1} - B^{n-1}_i)
+        float dw = float(n) * (float(cm) * pv[i - 1] * pt[n - i] - float(cn) * pv[i] * pt[n - 1 - i]);
+        cm = cn;
+        int k = i - 1;  // row index
+        vec4 ka = k < 3 ? LEAF.axis[min(k, 2)] : LEAF.sil_axis[max(k - 3, 0)];
+        vec4 kh = k < 3 ? LEAF.heights[min(k, 2)] : LEAF.sil_heights[max(k - 3, 0)];
+        vec4 tp = LEAF.sil_tilt[k / 2];
+        vec2 T = (k % 2 == 0) ? tp.xy : tp.zw;
+        vec3 Q = vec3(ka.w, kh.w, 0.0);
+        Pv += w * ka.xyz;
+        dPv += dw * ka.xyz;
+        Qv += w * Q;
+        dQv += dw * Q;
+        z += w * kh.xyz;
+        dz += dw * kh.xyz;
+        Tv += w * T;
+        dTv += dw * T;
+    }
+}
+
 // Evaluation strategy (exactly eqs 3-6, rearranged; the numpy reference in leafview/model/leaf.py
 // implements the equations literally and the readback test compares the two):
 // S, F and G for side sigma share the axis points A(v̄_i) and differ only in the fraction of
@@ -122,21 +167,28 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
     vec3 Q1 = vec3(k1.w, h1.w, 0.0), Q2 = vec3(k2.w, h2.w, 0.0), Q3 = vec3(k3.w, h3.w, 0.0);
     vec3 zf = vec3(h1.x, h2.x, h3.x), zg = vec3(h1.y, h2.y, h3.y), zs = vec3(h1.z, h2.z, h3.z);
 
-    // quartic weights at v for the inner points (the base is the origin, so it drops out) and
-    // the apex, and their v-derivatives
-    float t = 1.0 - v, v2 = v * v, t2 = t * t;
-    vec3 w = vec3(4.0 * t2 * t * v, 6.0 * t2 * v2, 4.0 * t * v2 * v);
-    float w_apex = v2 * v2;
-    vec4 b3 = bernstein3(v);  // quartic derivative weights: 4 (B3_{i-1} - B3_i)
-    vec3 dw = 4.0 * (b3.xyz - b3.yzw);
-    float dw_apex = 4.0 * b3.w;
+    vec3 Pv, Qv, dPv, dQv, z, dz;
+    vec2 Tv, dTv;
+    int rows = int(LEAF.tilt.w);  // 0: the paper's quartic; N: an extended silhouette of N rows
+    if (rows == 0) {
+        // quartic weights at v for the inner points (the base is the origin, so it drops out) and
+        // the apex, and their v-derivatives
+        float t = 1.0 - v, v2 = v * v, t2 = t * t;
+        vec3 w = vec3(4.0 * t2 * t * v, 6.0 * t2 * v2, 4.0 * t * v2 * v);
+        float w_apex = v2 * v2;
+        vec4 b3 = bernstein3(v);  // quartic derivative weights: 4 (B3_{i-1} - B3_i)
+        vec3 dw = 4.0 * (b3.xyz - b3.yzw);
+        float dw_apex = 4.0 * b3.w;
 
-    vec3 Pv = w.x * P1 + w.y * P2 + w.z * P3 + w_apex * LEAF_APEX;
-    vec3 Qv = w.x * Q1 + w.y * Q2 + w.z * Q3;
-    vec3 dPv = dw.x * P1 + dw.y * P2 + dw.z * P3 + dw_apex * LEAF_APEX;
-    vec3 dQv = dw.x * Q1 + dw.y * Q2 + dw.z * Q3;
-    vec3 z = vec3(dot(w, zf), dot(w, zg), dot(w, zs));      // zF, zG, zS at v
-    vec3 dz = vec3(dot(dw, zf), dot(dw, zg), dot(dw, zs));
+        Pv = w.x * P1 + w.y * P2 + w.z * P3 + w_apex * LEAF_APEX;
+        Qv = w.x * Q1 + w.y * Q2 + w.z * Q3;
+        dPv = dw.x * P1 + dw.y * P2 + dw.z * P3 + dw_apex * LEAF_APEX;
+        dQv = dw.x * Q1 + dw.y * Q2 + dw.z * Q3;
+        z = vec3(dot(w, zf), dot(w, zg), dot(w, zs));      // zF, zG, zS at v
+        dz = vec3(dot(dw, zf), dot(dw, zg), dot(dw, zs));
+    } else {
+        ext_silhouette(rows, v, Pv, Qv, dPv, dQv, z, dz, Tv, dTv);
+    }
 
     vec3 Av = cubic(LEAF_BASE, a1, a2, LEAF_APEX, v);
     vec3 dAv = cubic_dt(LEAF_BASE, a1, a2, LEAF_APEX, v);
@@ -149,6 +201,12 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
     e.Lu = sigma * db.x * (Av - Pv) + Qv + vec3(0.0, 0.0, sigma * dot(db.yzw, z));
     e.Lv = b.x * dAv + (1.0 - b.x) * dPv + u * dQv + vec3(0.0, 0.0, dot(b.yzw, dz));
     e.Luv = sigma * db.x * (dAv - dPv) + dQv + vec3(0.0, 0.0, sigma * dot(db.yzw, dz));
+    if (rows > 0) {  // tilted rows: + |u| T(v), T the side-independent tilt offsets
+        e.L.xy += s * Tv;
+        e.Lu.xy += sigma * Tv;
+        e.Lv.xy += s * dTv;
+        e.Luv.xy += sigma * dTv;
+    }
 
     // jittered silhouette (sec. 6): D = amp j(v) s^2 tau(v) sigma n(v)
 #ifndef LEAF_NO_JITTER

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from ..model.beam import BEND_SAMPLES, bend_profile
 from ..model.fbm import RIPPLE_SAMPLES
 from ..model.leaf import APEX, BASE, JITTER_TABLE_SIZE, jitter_table
-from ..model.params import LeafParams
+from ..model.params import MAX_SILHOUETTE_ROWS, LeafParams
 
 __all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "SPECIES_CULL_BLOCK", "DRAW_COMMAND_DTYPE", "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources"]
 
@@ -70,6 +70,9 @@ class Block:
         return np.zeros((), dtype=self.dtype)
 
 
+SIL_EXTRA_ROWS = MAX_SILHOUETTE_ROWS - 3   # silhouette rows beyond the paper's three
+_PAIRS = lambda n: -(-n // 2)  # noqa: E731  (vec4s holding n xy pairs)
+
 LEAF_BLOCK = Block(
     "LeafData", "Leaf",
     (
@@ -88,14 +91,23 @@ LEAF_BLOCK = Block(
         ("ripple_l", "vec4", 1),   # P, λ, k, θ of eq. 5 for the u >= 0 half (left in the top view)
         ("ripple_r", "vec4", 1),   # P, λ, k, θ for the u < 0 half
         ("bend_axis", "vec4", 1),  # bend axis N (leaf space), twist at the apex (radians)
+        # extended silhouette (leafview.model.params: N > 3 rows and/or tilted rows):
+        ("tilt", "vec4", 1),       # φ_1..3 (radians); w: N when the leaf is extended, else 0
+        ("sil_rows", "vec4", SIL_EXTRA_ROWS),  # rows 4..N: v̄_i, x̄s_i, z̄s_i, φ_i (radians)
+        ("sil_fg", "vec4", _PAIRS(SIL_EXTRA_ROWS)),  # rows 4..N: (z̄f_i, z̄g_i) pairs
         # derived on the GPU by leaf_prepare.comp, packed so the vertex shader loads 6 vec4s:
-        ("axis", "vec4", 3),       # xyz A(v̄_i), w (x̄s_i · n(v̄_i)).x
-        ("heights", "vec4", 3),    # z̄f_i, z̄g_i, z̄s_i, (x̄s_i · n(v̄_i)).y   (n has no z, eq. 2)
+        ("axis", "vec4", 3),       # xyz A(v̄_i), w (x̄s_i cos φ_i · n(v̄_i)).x
+        ("heights", "vec4", 3),    # z̄f_i, z̄g_i, z̄s_i, (x̄s_i cos φ_i · n(v̄_i)).y   (n has no z, eq. 2)
+        # the same for rows 4..N and the tilt offsets -x̄s_i sin φ_i t(v̄_i) (xy pairs, rows
+        # 1..N), written only for extended leaves:
+        ("sil_axis", "vec4", SIL_EXTRA_ROWS),
+        ("sil_heights", "vec4", SIL_EXTRA_ROWS),
+        ("sil_tilt", "vec4", _PAIRS(MAX_SILHOUETTE_ROWS)),
         # derived on the host by leafview.model.beam.bend_profile (eq. 4 by Newton's method):
         ("bend", "vec4", BEND_SAMPLES),  # Δ_k (bent minus straight midrib), Φ_k at v = k/(K-1)
     ),
     "one leaf: Ω, jitter, material, transform, ripple and bend settings, then derived data",
-    derived=("axis", "heights", "bend"),
+    derived=("axis", "heights", "sil_axis", "sil_heights", "sil_tilt", "bend"),
 )
 
 FRAME_BLOCK = Block(
@@ -138,11 +150,24 @@ def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: 
     s, j, m = params.shape, params.jitter, params.material
     rec["a1"][:3] = s.a1
     rec["a2"][:3] = s.a2
-    rec["vbar"][:3] = s.vbar
-    rec["xs"][:3] = s.xs
-    rec["zs"][:3] = s.zs
-    rec["zf"][:3] = s.zf
-    rec["zg"][:3] = s.zg
+    rec["vbar"][:3] = s.vbar[:3]  # rows 1-3; rows 4..N of an extended silhouette: sil_rows
+    rec["xs"][:3] = s.xs[:3]
+    rec["zs"][:3] = s.zs[:3]
+    rec["zf"][:3] = s.zf[:3]
+    rec["zg"][:3] = s.zg[:3]
+    if s.extended:
+        phi = s.phi
+        rec["tilt"] = (*phi[:3], float(s.rows))
+        rows = np.asarray(s.silhouette, dtype=np.float64)
+        extra = s.rows - 3
+        rec["sil_rows"][:extra] = np.c_[rows[3:], phi[3:]]
+        fg = np.zeros((2 * _PAIRS(SIL_EXTRA_ROWS), 2))
+        fg[:extra] = np.c_[s.zf[3:], s.zg[3:]]
+        rec["sil_fg"] = fg.reshape(-1, 4)
+    else:
+        rec["tilt"] = 0.0
+        rec["sil_rows"] = 0.0
+        rec["sil_fg"] = 0.0
     amp = j.amplitude if j.enabled else 0.0
     rec["jitter"] = (amp, j.density, JITTER_TABLE_SIZE, 0.0)
     rec["front"] = (*m.front, m.translucency)
@@ -217,6 +242,7 @@ def generated_sources() -> dict[str, str]:
     return {
         "generated/constants.glsl": (f"#define RIPPLE_SAMPLES {RIPPLE_SAMPLES}\n"
                                      f"#define BEND_SAMPLES {BEND_SAMPLES}\n"
+                                     f"#define SIL_MAX_ROWS {MAX_SILHOUETTE_ROWS}\n"
                                      f"const vec3 LEAF_BASE = vec3({_vec(BASE)});\n"
                                      f"const vec3 LEAF_APEX = vec3({_vec(APEX)});\n"),
         "generated/leaf_block.glsl": "#include \"generated/constants.glsl\"\n" + LEAF_BLOCK.glsl(LEAF_BINDING),

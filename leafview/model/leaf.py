@@ -10,6 +10,14 @@ Conventions (the GLSL in ``shaders/leaf_eval.glsl`` follows them line for line):
 * Control points (eqs 3-4) for side σ: ``s_i = A(v̄_i) + σ x̄_i n(v̄_i) + z̄s_i ẑ``,
   ``f_i`` and ``g_i`` the same with ``σ x̄_i / 3``, ``2 σ x̄_i / 3`` and ``z̄f_i``, ``z̄g_i``; S, F, G
   are quartics with base (0,0,0) and apex (0,1,0).
+* Extended silhouettes (:mod:`leafview.model.params`): N rows give S, F and G of degree N + 1
+  (eq. 1 with n = N + 1). A row tilted by φ_i displaces its control point along the normal turned
+  towards the base: ``s_i = A(v̄_i) + x̄_i (σ cos φ_i n(v̄_i) - sin φ_i t(v̄_i)) + z̄s_i ẑ`` with
+  ``t`` the unit axis tangent; F and G take 1/3 and 2/3 of the same displacement. The tilt part
+  does not depend on σ, so the blade stays mirror-symmetric about the axis, and the rulings near
+  the margin point from the feet ``A(v̄_i)`` to the margin: a basal lobe hangs from the base
+  instead of being swept by lines parallel to n (which would fill the sinus of a cordate leaf).
+  With N = 3 and φ = 0 this is exactly the paper's quartic.
 * Cross-section (eqs 5-6): ``L = Σ_k B³_k(s) c_k(v)`` with ``c = (A, F_σ, G_σ, S_σ)``.
 * Jitter (sec. 6), when enabled: ``D = amp · j(v) · s² · τ(v) · σ n(v)`` with ``j`` the periodic
   piecewise-linear table read at ``v · density``, ``τ(v) = 1 - (2v - 1)⁴`` (zero at base and
@@ -34,6 +42,7 @@ from .params import Jitter, LeafParams
 __all__ = [
     "JITTER_TABLE_SIZE",
     "axis_frames",
+    "tilt_offsets",
     "control_polygons",
     "jitter_table",
     "Partials",
@@ -77,7 +86,8 @@ def _axis_normal(d: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def axis_frames(params: LeafParams) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """The per-leaf constants of eqs 3-4: ``A(v̄_i)`` and ``x̄s_i · n(v̄_i)``, each (3, 3).
+    """The per-leaf constants of eqs 3-4: ``A(v̄_i)`` and ``x̄s_i cos φ_i · n(v̄_i)``, each (N, 3)
+    (N = 3 rows and φ = 0 for the paper's model: ``x̄s_i · n(v̄_i)``).
 
     The GPU computes the same two arrays once per leaf (``shaders/leaf_prepare.comp``).
     """
@@ -85,23 +95,37 @@ def axis_frames(params: LeafParams) -> tuple[NDArray[np.float64], NDArray[np.flo
     pa = sh.axis_points()
     a = _curve(pa, sh.vbar)
     n = _axis_normal(_curve(derivative_points(pa), sh.vbar))
-    return a, sh.xs[:, None] * n
+    xs = sh.xs if not sh.extended else sh.xs * np.cos(sh.phi)
+    return a, xs[:, None] * n
+
+
+def tilt_offsets(params: LeafParams) -> NDArray[np.float64]:
+    """The side-independent part of each tilted row's displacement, ``-x̄s_i sin φ_i t(v̄_i)``
+    with ``t`` the unit in-plane axis tangent, (N, 3); zero for untilted rows. The GPU's prepare
+    pass writes the same numbers (``tilt`` rows of the leaf record)."""
+    sh = params.shape
+    pa = sh.axis_points()
+    d = _curve(derivative_points(pa), sh.vbar)
+    t = np.stack([d[:, 0], d[:, 1], np.zeros(len(d))], axis=-1)
+    t /= np.linalg.norm(t, axis=-1, keepdims=True)
+    return (-sh.xs * np.sin(sh.phi))[:, None] * t
 
 
 def _side_controls(params: LeafParams) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Control points of S, F and G (eqs 3, 4a, 4b) for both sides.
 
-    Returns ``(plus, minus)``, each (5, 9): columns 0-2 are S, 3-5 F, 6-8 G, rows the five control
-    points base, three inner, apex.
+    Returns ``(plus, minus)``, each (N + 2, 9): columns 0-2 are S, 3-5 F, 6-8 G, rows the control
+    points base, N inner (N = 3 for the paper's quartic), apex.
     """
     sh = params.shape
     a, q = axis_frames(params)
+    tq = tilt_offsets(params) if sh.extended else np.zeros_like(q)
     z = np.array([0.0, 0.0, 1.0])
     out = []
     for sigma in (1.0, -1.0):
         cols = []
         for frac, zz in ((1.0, sh.zs), (1 / 3, np.asarray(sh.zf)), (2 / 3, np.asarray(sh.zg))):
-            mid = a + (sigma * frac) * q + np.asarray(zz)[:, None] * z
+            mid = a + (sigma * frac) * q + frac * tq + np.asarray(zz)[:, None] * z
             cols.append(np.vstack([BASE, mid, APEX]))
         out.append(np.hstack(cols))
     return out[0], out[1]
@@ -110,7 +134,7 @@ def _side_controls(params: LeafParams) -> tuple[NDArray[np.float64], NDArray[np.
 def control_polygons(params: LeafParams) -> dict[str, NDArray[np.float64]]:
     """Control points of the curves of eqs 3-4 in leaf space, for drawing control polygons:
     ``"A"`` (4, 3); ``"S+"``, ``"F+"``, ``"G+"`` (the u >= 0 half) and ``"S-"``, ``"F-"``,
-    ``"G-"`` (5, 3) each."""
+    ``"G-"`` (N + 2, 3) each (5 for the paper's quartic)."""
     plus, minus = _side_controls(params)
     out = {"A": params.shape.axis_points()}
     for sign, ctrl in (("+", plus), ("-", minus)):
@@ -148,7 +172,8 @@ def partials(params: LeafParams, u: ArrayLike, v: ArrayLike) -> Partials:
     pa_d = derivative_points(pa)
 
     # longitudinal curves c_k(v) = (A, F_σ, G_σ, S_σ) and their v-derivatives (eq. 5)
-    b4, db4, b3 = _basis(4, vv), _basis(3, vv), _basis(3, vv)
+    deg = params.shape.rows + 1  # 4: the paper's quartic
+    b4, db4, b3 = _basis(deg, vv), _basis(deg - 1, vv), _basis(3, vv)
     c = np.empty((4,) + vv.shape + (3,))
     dc = np.empty_like(c)
     c[0], dc[0] = b3 @ pa, _basis(2, vv) @ pa_d
@@ -158,7 +183,7 @@ def partials(params: LeafParams, u: ArrayLike, v: ArrayLike) -> Partials:
         if not mask.any():
             continue
         pos = (b4[mask] @ ctrl).reshape(-1, 3, 3)  # (n, curve S/F/G, xyz)
-        der = (db4[mask] @ (4.0 * (ctrl[1:] - ctrl[:-1]))).reshape(-1, 3, 3)
+        der = (db4[mask] @ (float(deg) * (ctrl[1:] - ctrl[:-1]))).reshape(-1, 3, 3)
         c[3][mask], c[1][mask], c[2][mask] = pos[:, 0], pos[:, 1], pos[:, 2]
         dc[3][mask], dc[1][mask], dc[2][mask] = der[:, 0], der[:, 1], der[:, 2]
 

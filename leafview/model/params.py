@@ -6,7 +6,19 @@ Layout of Ω (``to_vector`` / ``from_vector``)::
     [a1(3), a2(3), v̄1, x̄s1, z̄s1, v̄2, x̄s2, z̄s2, v̄3, x̄s3, z̄s3, z̄f1, z̄f2, z̄f3, z̄g1, z̄g2, z̄g3]
 
 The axis A is cubic with fixed base (0,0,0) and apex (0,1,0); S, F and G are quartic and share
-base and apex with it (eqs 3-4). Parameters are immutable: edits return new objects, which makes
+base and apex with it (eqs 3-4).
+
+Extended silhouettes. Seed 004 defines S, F and G for any degree n (n - 1 inner control points;
+the paper picks n = 4, giving 21 numbers). ``shape.silhouette`` may hold N = 3 ..
+:data:`MAX_SILHOUETTE_ROWS` rows, making S, F and G of degree N + 1, with one z̄f and one z̄g
+per row. Each row may also be *tilted* (``shape.tilt``, degrees): its control point is displaced
+from the foot ``A(v̄_i)`` along the normal turned by φ_i towards the base (φ > 0) or the apex
+(φ < 0), so cordate lobes below the base and emarginate shoulders above the apex are reachable
+with the feet still on the midrib (see :mod:`leafview.model.leaf`). The default (N = 3, no tilt)
+is exactly the paper's model; such a leaf's Ω is the 21 numbers above. An extended leaf's Ω is
+``[a1, a2, rows (3N), z̄f (N), z̄g (N), tilt (N)]``, 6 + 6N numbers.
+
+Parameters are immutable: edits return new objects, which makes
 undo and comparison trivial.
 """
 
@@ -22,6 +34,7 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = [
     "SCHEMA_VERSION",
     "OMEGA_SIZE",
+    "MAX_SILHOUETTE_ROWS",
     "ParamError",
     "FieldSpec",
     "Shape",
@@ -35,7 +48,8 @@ __all__ = [
 ]
 
 SCHEMA_VERSION = 1
-OMEGA_SIZE = 21
+OMEGA_SIZE = 21             # Ω of the paper's quartic model (3 silhouette rows, no tilt)
+MAX_SILHOUETTE_ROWS = 7     # silhouette rows of an extended leaf: degree up to 8
 
 Vec3 = tuple[float, float, float]
 
@@ -65,7 +79,7 @@ class FieldSpec:
     soft_range: tuple[float, float]
     step: float
     hard_range: tuple[float | None, float | None] = (None, None)
-    kind: str = "float"  # float | int | bool | color | vec3 | pair | rows
+    kind: str = "float"  # float | int | bool | color | vec3 | pair | rows | per_row
     positive: bool = False  # strictly greater than zero
 
 
@@ -81,13 +95,37 @@ class Shape:
 
     a1: Vec3 = _spec("axis a1", "axis", -0.5, 0.5, 0.005, kind="vec3", default=(0.0, 1 / 3, 0.0))
     a2: Vec3 = _spec("axis a2", "axis", -0.5, 1.0, 0.005, kind="vec3", default=(0.0, 2 / 3, 0.0))
-    silhouette: tuple[Vec3, Vec3, Vec3] = _spec(
+    silhouette: tuple[Vec3, ...] = _spec(
         "silhouette rows (v̄, x̄s, z̄s)", "silhouette", -0.5, 1.0, 0.005, kind="rows",
         default=((0.25, 0.35, 0.0), (0.5, 0.4, 0.0), (0.75, 0.25, 0.0)))
-    zf: Vec3 = _spec("z̄f (F at 1/3 width)", "curvature", -0.3, 0.3, 0.002, kind="vec3",
-                     default=(0.0, 0.0, 0.0))
-    zg: Vec3 = _spec("z̄g (G at 2/3 width)", "curvature", -0.3, 0.3, 0.002, kind="vec3",
-                     default=(0.0, 0.0, 0.0))
+    zf: tuple[float, ...] = _spec("z̄f (F at 1/3 width)", "curvature", -0.3, 0.3, 0.002, kind="per_row",
+                                  default=(0.0, 0.0, 0.0))
+    zg: tuple[float, ...] = _spec("z̄g (G at 2/3 width)", "curvature", -0.3, 0.3, 0.002, kind="per_row",
+                                  default=(0.0, 0.0, 0.0))
+    tilt: tuple[float, ...] = _spec("row tilt φ (degrees, + towards the base)", "silhouette", -90.0, 90.0, 0.5,
+                                    hard=(-90.0, 90.0), kind="per_row", default=(0.0, 0.0, 0.0))
+
+    def __post_init__(self) -> None:
+        # an untilted shape built with more rows than the default tilt gets one zero per row
+        n = len(self.silhouette)
+        if len(self.tilt) != n and not any(self.tilt):
+            object.__setattr__(self, "tilt", (0.0,) * n)
+
+    @property
+    def rows(self) -> int:
+        """N, the number of silhouette rows (S, F and G have degree N + 1)."""
+        return len(self.silhouette)
+
+    @property
+    def extended(self) -> bool:
+        """True unless this is the paper's quartic (3 rows, no tilt): such leaves take the
+        extended evaluation path on the GPU."""
+        return self.rows != 3 or any(float(t) != 0.0 for t in self.tilt)
+
+    @property
+    def phi(self) -> NDArray[np.float64]:
+        """The row tilts φ_i in radians."""
+        return np.radians(np.asarray(self.tilt, dtype=np.float64))
 
     @property
     def vbar(self) -> NDArray[np.float64]:
@@ -214,22 +252,32 @@ class LeafParams:
 
     # -- Ω as a flat vector -------------------------------------------------------------------
     def to_vector(self) -> NDArray[np.float64]:
-        """Ω in the paper's order (see the module docstring), shape (21,)."""
+        """Ω in the paper's order (see the module docstring): shape (21,) for the paper's quartic,
+        (6 + 6N,) with the tilts appended for an extended silhouette of N rows."""
         s = self.shape
         rows = [c for row in s.silhouette for c in row]
-        return np.array([*s.a1, *s.a2, *rows, *s.zf, *s.zg], dtype=np.float64)
+        tail = list(s.tilt) if s.extended else []
+        return np.array([*s.a1, *s.a2, *rows, *s.zf, *s.zg, *tail], dtype=np.float64)
 
     @classmethod
     def from_vector(cls, omega: ArrayLike) -> "LeafParams":
-        """Build parameters from Ω (21 numbers); jitter off, everything else at its default."""
+        """Build parameters from Ω: 21 numbers (the paper's quartic) or 6 + 6N numbers (an
+        extended silhouette of N rows with tilts, as :meth:`to_vector` writes it); jitter off,
+        everything else at its default."""
         w = np.asarray(omega, dtype=np.float64)
-        if w.shape != (OMEGA_SIZE,):
-            raise ParamError("omega", f"expected {OMEGA_SIZE} numbers, got shape {w.shape}")
+        sizes = {6 + 6 * n: n for n in range(3, MAX_SILHOUETTE_ROWS + 1)}
+        if w.ndim != 1 or (w.size != OMEGA_SIZE and w.size not in sizes):
+            raise ParamError("omega", f"expected {OMEGA_SIZE} numbers (or 6 + 6N for N = 3..{MAX_SILHOUETTE_ROWS} "
+                             f"silhouette rows with tilts), got shape {w.shape}")
+        n = 3 if w.size == OMEGA_SIZE else sizes[w.size]
+        e = 6 + 3 * n
         data = {
             "a1": w[0:3], "a2": w[3:6],
-            "silhouette": w[6:15].reshape(3, 3),
-            "zf": w[15:18], "zg": w[18:21],
+            "silhouette": w[6:e].reshape(n, 3),
+            "zf": w[e:e + n], "zg": w[e + n:e + 2 * n],
         }
+        if w.size != OMEGA_SIZE:
+            data["tilt"] = w[e + 2 * n:e + 3 * n]
         shape = _parse_group(Shape, {k: v.tolist() for k, v in data.items()}, "shape", required=True)
         return cls(shape=shape)
 
@@ -320,7 +368,7 @@ def _check_range(x: float, spec: FieldSpec, path: str) -> None:
         raise ParamError(path, f"{x!r} is above the maximum {hi}")
 
 
-def _parse_field(value: Any, spec: FieldSpec, path: str) -> Any:
+def _parse_field(value: Any, spec: FieldSpec, path: str, rows: int = 3) -> Any:
     if spec.kind == "bool":
         if not isinstance(value, bool):
             raise ParamError(path, f"expected true or false, got {type(value).__name__} {value!r}")
@@ -338,9 +386,19 @@ def _parse_field(value: Any, spec: FieldSpec, path: str) -> Any:
     if spec.kind == "rows":
         if isinstance(value, np.ndarray):
             value = value.tolist()
-        if not isinstance(value, (list, tuple)) or len(value) != 3:
-            raise ParamError(path, "expected 3 rows [v̄, x̄s, z̄s]")
+        if not isinstance(value, (list, tuple)) or not 3 <= len(value) <= MAX_SILHOUETTE_ROWS:
+            raise ParamError(path, f"expected 3 to {MAX_SILHOUETTE_ROWS} rows [v̄, x̄s, z̄s]")
         return tuple(_vector(row, 3, f"{path}[{i}]") for i, row in enumerate(value))
+    if spec.kind == "per_row":
+        if isinstance(value, np.ndarray):
+            value = value.tolist()
+        if not isinstance(value, (list, tuple)) or len(value) != rows:
+            got = len(value) if isinstance(value, (list, tuple)) else f"{type(value).__name__} {value!r}"
+            raise ParamError(path, f"expected {rows} numbers (one per silhouette row), got {got}")
+        vec = _vector(value, rows, path)
+        for i, x in enumerate(vec):
+            _check_range(x, spec, f"{path}[{i}]")
+        return vec
     x = _number(value, path)
     _check_range(x, spec, path)
     return x
@@ -354,13 +412,16 @@ def _parse_group(cls: type, data: Any, group: str, *, required: bool) -> Any:
         if key not in known:
             raise ParamError(f"{group}.{key}", f"unknown key (known: {', '.join(known)})")
     values = {}
-    for name, f in known.items():
+    rows = 3
+    for name, f in known.items():  # silhouette comes before the per-row fields
         path = f"{group}.{name}"
         if name not in data:
-            if required:
+            if required and not (cls is Shape and name == "tilt"):  # tilt is optional (schema 1 files)
                 raise ParamError(path, "missing field")
             continue
-        values[name] = _parse_field(data[name], f.metadata["spec"], path)
+        values[name] = _parse_field(data[name], f.metadata["spec"], path, rows)
+        if name == "silhouette":
+            rows = len(values[name])
     obj = cls(**values)
     if cls is Shape:
         _check_shape(obj)
@@ -374,7 +435,11 @@ def _check_shape(shape: Shape) -> None:
     for i, x in enumerate(v):
         if not 0.0 < x < 1.0:
             raise ParamError(f"shape.silhouette[{i}][0]", f"v̄ = {x!r} must lie strictly inside (0, 1)")
-    for i in range(1, 3):
+    for name in ("zf", "zg", "tilt"):
+        if len(getattr(shape, name)) != len(v):
+            raise ParamError(f"shape.{name}", f"expected {len(v)} numbers (one per silhouette row), "
+                             f"got {len(getattr(shape, name))}")
+    for i in range(1, len(v)):
         if not v[i] > v[i - 1]:
             raise ParamError(f"shape.silhouette[{i}][0]",
                              f"v̄ must be strictly increasing: {v[i - 1]!r} then {v[i]!r}")

@@ -1,0 +1,150 @@
+"""Export of baked leaves and scenes: glTF 2.0 (.glb/.gltf), OBJ, PLY and USD (.usda/.usdc).
+
+:func:`export_leaf` and :func:`export_scene` bake the leaves (:mod:`.bake`), group them by shape
+(:mod:`.scene`) and pick the writer from the file suffix (:mod:`.gltf`, :mod:`.objply`,
+:mod:`.usd`). Every option is checked before anything is baked, every file is written atomically
+(a failure leaves no file) and non-finite vertices are refused. ``docs/export.md`` has the
+conventions (axes, units, texture coordinates, the two leaf sides).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from ..errors import UsageError
+from ..model.params import LeafParams
+from .mesh import BACKENDS, DEFAULT_RESOLUTION, LeafMesh, NonFiniteMesh, bake, bake_many
+from .scene import (
+    ExportPart,
+    ExportScene,
+    SceneLike,
+    leaf_scene,
+    leaves_scene,
+    scene_from,
+)
+
+__all__ = [
+    "BACKENDS",
+    "DEFAULT_LENGTH_M",
+    "DEFAULT_RESOLUTION",
+    "FORMATS",
+    "ExportPart",
+    "ExportScene",
+    "LeafMesh",
+    "NonFiniteMesh",
+    "SceneLike",
+    "bake",
+    "bake_many",
+    "export_leaf",
+    "export_leaves",
+    "export_scene",
+    "format_of",
+    "write",
+]
+
+FORMATS = {".glb": "glb", ".gltf": "gltf", ".obj": "obj", ".ply": "ply", ".usda": "usda", ".usdc": "usdc"}
+DEFAULT_LENGTH_M = 0.1     # a leaf length in metres: a 10 cm leaf, typical of broad-leaved trees
+_OPTIONS = {"glb": ("back_faces", "instancing", "instance_threshold"),
+            "gltf": ("back_faces", "instancing", "instance_threshold"),
+            "obj": ("up",), "ply": ("up",), "usda": ("back_faces",), "usdc": ("back_faces",)}
+
+
+def format_of(path: str | Path) -> str:
+    """The export format of ``path`` from its suffix; UsageError for anything else."""
+    fmt = FORMATS.get(Path(path).suffix.lower())
+    if fmt is None:
+        raise UsageError(f"{path}: unknown export format {Path(path).suffix or '(no suffix)'!r} "
+                         f"(use {', '.join(FORMATS)})")
+    return fmt
+
+
+def _check_options(fmt: str, options: dict[str, Any]) -> dict[str, Any]:
+    """Keep the options ``fmt`` uses (None means default) and validate their values early."""
+    from .gltf import BACK_FACES, INSTANCING_MODES
+    from .objply import UP_AXES
+
+    kept = {k: v for k, v in options.items() if v is not None and k in _OPTIONS[fmt]}
+    unknown = set(options) - {"back_faces", "instancing", "instance_threshold", "up"}
+    if unknown:
+        raise TypeError(f"unknown export option(s): {', '.join(sorted(unknown))}")
+    for key, allowed in (("back_faces", BACK_FACES), ("instancing", INSTANCING_MODES), ("up", UP_AXES)):
+        if key in kept and kept[key] not in allowed:
+            raise UsageError(f"{key.replace('_', '-')} must be one of {', '.join(allowed)}, got {kept[key]!r}")
+    if "instance_threshold" in kept and int(kept["instance_threshold"]) < 1:
+        raise UsageError("instance threshold must be at least 1")
+    return kept
+
+
+def _check_length(length_m: float) -> float:
+    try:
+        value = float(length_m)
+    except (TypeError, ValueError):
+        raise UsageError(f"length must be a number of metres, got {length_m!r}") from None
+    if not (value > 0.0 and value < float("inf")):
+        raise UsageError(f"length must be a positive, finite number of metres, got {length_m!r}")
+    return value
+
+
+def write(scene: ExportScene, path: str | Path, **options: Any) -> Path:
+    """Write an :class:`ExportScene` with the writer for ``path``'s suffix (atomically)."""
+    fmt = format_of(path)
+    kept = _check_options(fmt, options)
+    scene.length_m = _check_length(scene.length_m)
+    if fmt in ("glb", "gltf"):
+        from .gltf import write_gltf
+
+        return write_gltf(scene, path, **kept)
+    if fmt == "obj":
+        from .objply import write_obj
+
+        return write_obj(scene, path, **kept)
+    if fmt == "ply":
+        from .objply import write_ply
+
+        return write_ply(scene, path, **kept)
+    from .usd import write_usd
+
+    return write_usd(scene, path, **kept)
+
+
+def export_leaf(params: LeafParams, path: str | Path, *, resolution: Sequence[int] = DEFAULT_RESOLUTION,
+                backend: str = "gpu", length_m: float = DEFAULT_LENGTH_M, renderer: Any = None,
+                **options: Any) -> Path:
+    """Bake ``params`` and write it to ``path`` (format from the suffix), placed by its transform.
+
+    ``options``: ``back_faces`` and ``instancing`` (glTF), ``back_faces`` (USD), ``up`` (OBJ/PLY).
+    """
+    fmt = format_of(path)
+    _check_options(fmt, options)
+    length_m = _check_length(length_m)
+    mesh = bake(params, resolution, backend=backend, renderer=renderer)
+    return write(leaf_scene(params, mesh, length_m=length_m), path, **options)
+
+
+def export_leaves(leaves: Sequence[LeafParams], path: str | Path, *, resolution: Sequence[int] = DEFAULT_RESOLUTION,
+                  backend: str = "gpu", length_m: float = DEFAULT_LENGTH_M, renderer: Any = None,
+                  progress: Callable[[int], None] | None = None, **options: Any) -> Path:
+    """Several leaves, each at its own transform, into one file."""
+    fmt = format_of(path)
+    _check_options(fmt, options)
+    scene = leaves_scene(leaves, resolution, backend=backend, renderer=renderer, length_m=_check_length(length_m),
+                         progress=progress, name=Path(path).stem)
+    return write(scene, path, **options)
+
+
+def export_scene(scene: SceneLike, path: str | Path, *, resolution: Sequence[int] = DEFAULT_RESOLUTION,
+                 backend: str = "gpu", length_m: float = DEFAULT_LENGTH_M, renderer: Any = None,
+                 progress: Callable[[int], None] | None = None, name: str | None = None,
+                 **options: Any) -> Path:
+    """Bake every distinct shape of ``scene`` once and write all leaves and stems to ``path``.
+
+    Leaves sharing a shape share one mesh (glTF nodes or EXT_mesh_gpu_instancing, a USD
+    PointInstancer); OBJ and PLY get world-space copies. ``progress(n)`` counts baked shapes.
+    """
+    fmt = format_of(path)
+    _check_options(fmt, options)
+    export = scene_from(scene, resolution, backend=backend, renderer=renderer, length_m=_check_length(length_m),
+                        progress=progress, name=name or Path(path).stem)
+    return write(export, path, **options)

@@ -1,0 +1,111 @@
+"""Botanical leaf shapes (Garg & Leow, Table 1 and Fig. 5) as shader-model leaves.
+
+The landmark model (:mod:`leafview.model.shapes`) describes a margin; :mod:`leafview.model.outline_fit`
+fits the shader model Ω to it. The fits of the 62 catalogue entries are precomputed into
+``assets/shapes/<name>.toml`` (plain leaf presets) with their errors in ``assets/shapes/fits.json``
+by ``tools/make_shapes.py`` (about a minute; a test checks the files still match the catalogue).
+Random instances (Fig. 8) are fitted when asked for: about 0.01-0.05 s each with the linear fit,
+up to a few seconds with the least-squares polish.
+
+``leafview shapes`` (:mod:`leafview.shapes.cli`) lists and renders them; ``leafview bench shapes``
+(:mod:`leafview.shapes.bench`) measures generation and rendering rates.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+from typing import Any
+
+from ..model.params import LeafParams, ParamError
+
+__all__ = ["ShapeFitInfo", "shapes_dir", "shape_names", "shapes_params", "fit_info", "fit_landmark_leaf"]
+
+
+@dataclass(frozen=True)
+class ShapeFitInfo:
+    """What ``tools/make_shapes.py`` recorded for one catalogue shape."""
+
+    name: str
+    waist: str
+    base: str
+    apex: str
+    rows: int
+    quartic: bool
+    error: float          # Hausdorff ÷ leaf length, both sides
+    min_jacobian: float   # > 0: the blade does not fold
+
+
+def shapes_dir() -> Path:
+    """``assets/shapes`` (in the wheel or the source tree)."""
+    from ..resources import asset_dir
+
+    return asset_dir() / "shapes"
+
+
+@lru_cache(maxsize=1)
+def _index() -> dict[str, ShapeFitInfo]:
+    path = shapes_dir() / "fits.json"
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{path} is missing: run tools/make_shapes.py") from None
+    return {d["name"]: ShapeFitInfo(**d) for d in data["shapes"]}
+
+
+def shape_names() -> list[str]:
+    """The catalogue names with a precomputed fit, in catalogue order."""
+    return list(_index())
+
+
+def fit_info(name: str) -> ShapeFitInfo:
+    """The recorded fit of catalogue shape ``name``; :class:`ParamError` for unknown names."""
+    index = _index()
+    if name not in index:
+        from difflib import get_close_matches
+
+        near = get_close_matches(name, list(index), n=3)
+        hint = f" (did you mean {', '.join(near)}?)" if near else " (`leafview shapes` lists them)"
+        raise ParamError("shape", f"unknown catalogue shape {name!r}{hint}")
+    return index[name]
+
+
+def fit_landmark_leaf(leaf: Any, *, polish: bool = True, n: int = 256, **kwargs: Any) -> Any:
+    """Fit Ω to a :class:`~leafview.model.landmarks.LandmarkLeaf`; returns the
+    :class:`~leafview.model.outline_fit.OutlineFit`."""
+    from ..model.landmarks import outline
+    from ..model.outline_fit import fit_outline
+
+    return fit_outline(outline(leaf, n), polish=polish, name=getattr(leaf, "name", "") or "", **kwargs)
+
+
+def shapes_params(name: str, seed: int | None = None, *, amount: float = 0.2, polish: bool = True) -> LeafParams:
+    """The shader-model leaf of catalogue shape ``name``.
+
+    Parameters
+    ----------
+    name
+        A catalogue name (``leafview shapes`` lists them), e.g. ``"cordate"`` or
+        ``"ovate-extended-convex"``.
+    seed
+        None: the precomputed fit of the shape itself. An integer: a random instance of the shape
+        (Garg & Leow Fig. 8, landmark parameters perturbed by up to ``amount``), fitted now.
+    polish
+        For random instances: run the least-squares polish (slower, closer; see
+        :func:`~leafview.model.outline_fit.fit_outline`).
+    """
+    fit_info(name)  # clear error for unknown names
+    if seed is None:
+        return _load(name)
+    from ..model.shapes import landmark_leaf, random_instance
+
+    leaf = random_instance(landmark_leaf(name), int(seed), amount)
+    params = fit_landmark_leaf(leaf, polish=polish).params
+    return params.replace(name=f"{name}#{seed}")
+
+
+@lru_cache(maxsize=128)
+def _load(name: str) -> LeafParams:
+    return LeafParams.load(shapes_dir() / f"{name}.toml")
