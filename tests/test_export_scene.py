@@ -260,3 +260,12 @@ def test_cli_exports_a_scene_file(gl, tmp_path, capsys):
     drawn = [name for _, _, name in f.mesh_instances()]
     assert len(drawn) == 60 + 1 and drawn.count("stems") == 1
     assert main(["export", str(scene_file), "ovate", "-o", str(tmp_path / "x.glb")]) == 2
+
+
+def test_oversized_glb_is_refused_before_baking(presets, tmp_path):
+    leaf = presets["ovate"]
+    n = 3000
+    scene = StandInScene([leaf] * n, np.arange(n, dtype=np.int32), np.repeat(np.eye(4)[None], n, axis=0))
+    with pytest.raises(UsageError, match="above the format's 4 GiB limit"):
+        export_scene(scene, tmp_path / "huge.glb", resolution=(513, 1025), backend="numpy")
+    assert list(tmp_path.iterdir()) == []

@@ -50,3 +50,42 @@ fig.tight_layout()
 out = Path("docs/images/export_reimport.png")
 fig.savefig(out, facecolor="white")
 print("wrote", out)
+
+# -- a small scene: exported with one node per leaf, read back by trimesh, drawn by matplotlib ---
+from leafview.export import export_scene
+from leafview.model.scene import SceneSpec, build_scene
+
+spec = SceneSpec(species=(leafview.LeafParams.load(builtin_presets()["beech"]),), layout="plant", leaves=160,
+                 seed=4, variation=0.15, colour_variation=0.1, plant={"height": 6.0, "branches": 6})
+scene = build_scene(spec)
+with tempfile.TemporaryDirectory() as tmp:
+    path = export_scene(scene, Path(tmp) / "plant.glb", resolution=(9, 17), length_m=1.0, instancing="nodes")
+    loaded = trimesh.load(path, process=False)
+    fig = plt.figure(figsize=(5, 5), dpi=100)
+    ax = fig.add_subplot(projection="3d")
+    light = np.array([0.3, 0.8, 0.5]) / np.linalg.norm([0.3, 0.8, 0.5])
+    for name, geom in loaded.geometry.items():
+        for node in loaded.graph.geometry_nodes[name]:
+            m = loaded.graph[node][0]
+            v = (geom.vertices @ m[:3, :3].T + m[:3, 3]) @ np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]]).T
+            base = np.array(geom.visual.material.baseColorFactor[:3]) / 255.0 if hasattr(geom.visual, "material") \
+                and getattr(geom.visual.material, "baseColorFactor", None) is not None else np.array([0.3, 0.5, 0.2])
+            tri = v[geom.faces]
+            n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+            shade = 0.35 + 0.65 * np.abs(n @ np.array([light[0], light[2], light[1]]))
+            colour = np.clip(base ** (1 / 2.2) * shade[:, None], 0, 1)
+            ax.add_collection3d(Poly3DCollection(tri, facecolors=colour, edgecolors="none"))
+    lo, hi = scene.bounds()
+    lo = np.minimum(lo, [lo[0], lo[1], 0.0])          # down to the ground, where the trunk starts
+    c, r = (lo + hi) / 2, (hi - lo).max() / 2
+    ax.set_xlim(c[0] - r, c[0] + r)
+    ax.set_ylim(c[1] - r, c[1] + r)
+    ax.set_zlim(c[2] - r, c[2] + r)
+    ax.view_init(elev=15, azim=-60)
+    ax.set_axis_off()
+    ax.set_box_aspect(None, zoom=1.9)
+    ax.set_title(f"{len(scene)} leaves + stems: .glb read back with trimesh", fontsize=9)
+    out = Path("docs/images/export_scene.png")
+    fig.savefig(out, facecolor="white")
+    print("wrote", out)

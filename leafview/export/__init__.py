@@ -1,6 +1,6 @@
 """Export of baked leaves and scenes: glTF 2.0 (.glb/.gltf), OBJ, PLY and USD (.usda/.usdc).
 
-:func:`export_leaf` and :func:`export_scene` bake the leaves (:mod:`.bake`), group them by shape
+:func:`export_leaf` and :func:`export_scene` bake the leaves (:mod:`.mesh`), group them by shape
 (:mod:`.scene`) and pick the writer from the file suffix (:mod:`.gltf`, :mod:`.objply`,
 :mod:`.usd`). Every option is checked before anything is baked, every file is written atomically
 (a failure leaves no file) and non-finite vertices are refused. ``docs/export.md`` has the
@@ -12,6 +12,8 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from ..errors import UsageError
 from ..model.params import LeafParams
@@ -87,6 +89,21 @@ def _check_length(length_m: float) -> float:
     return value
 
 
+def _check_glb_size(scene: SceneLike, resolution: Sequence[int]) -> None:
+    """Refuse before baking a scene whose GLB would pass the format's 4 GiB limit."""
+    from .mesh import check_resolution
+
+    nu, nv = check_resolution(resolution)
+    verts, tris = nu * nv - 2, 2 * (nu - 1) * (nv - 1) - 2 * (nu - 1)
+    index_bytes = 2 if verts < 65535 else 4
+    per_shape = verts * (12 + 12 + 8 + 12) + 2 * 3 * tris * index_bytes   # pos, nrm, st, back nrm; 2 sides
+    shapes = len(np.unique(np.asarray(scene.shape_ids))) if len(scene) else 0
+    estimate = shapes * per_shape + 40 * len(scene)
+    if estimate > 2**32 - 1:
+        raise UsageError(f"{shapes:,} distinct leaves at {nu}x{nv} would make a {estimate / 2**30:.1f} GiB GLB, "
+                         "above the format's 4 GiB limit: lower --resolution, or use .usdc")
+
+
 def write(scene: ExportScene, path: str | Path, **options: Any) -> Path:
     """Write an :class:`ExportScene` with the writer for ``path``'s suffix (atomically)."""
     fmt = format_of(path)
@@ -145,6 +162,8 @@ def export_scene(scene: SceneLike, path: str | Path, *, resolution: Sequence[int
     """
     fmt = format_of(path)
     _check_options(fmt, options)
+    if fmt == "glb":
+        _check_glb_size(scene, resolution)
     export = scene_from(scene, resolution, backend=backend, renderer=renderer, length_m=_check_length(length_m),
                         progress=progress, name=name or Path(path).stem)
     return write(export, path, **options)
