@@ -3,7 +3,6 @@ and bad input (exit 2, the field named, no file written)."""
 
 import json
 
-import numpy as np
 import pytest
 
 from leafview.cli import main

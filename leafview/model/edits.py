@@ -80,7 +80,7 @@ def curve_longitudinal(params: LeafParams, curve: Literal["S", "F", "G"], z: flo
         rows = [[v, x, h] for v, x, _ in params.shape.silhouette]
         return _shape(params, silhouette=rows)
     if curve in ("F", "G"):
-        return _shape(params, **{f"z{curve.lower()}": [h, h, h]})
+        return _shape(params, **{f"z{curve.lower()}": [h] * params.shape.rows})  # one per silhouette row
     raise ParamError("curve", f"expected 'S', 'F' or 'G', got {curve!r}")
 
 

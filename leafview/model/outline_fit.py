@@ -227,15 +227,14 @@ def fit_side(points: ArrayLike, rows: int, *, iterations: int = 12, polish: bool
 
 
 def _polish(pts, t, inner, n):
-    """Joint refinement of the inner control points and the sample parameters."""
+    """Joint refinement of the inner control points and the sample parameters (each sample's
+    parameter is its own variable in [0, 1], so the Jacobian is sparse: finite differences need
+    one column group per control coordinate plus one for all the parameters)."""
     k = len(pts)
-    steps0 = np.maximum(np.diff(t), 1e-4)
+    nc = 2 * (n - 1)
 
     def unpack(x):
-        c = x[:2 * (n - 1)].reshape(n - 1, 2)
-        st = np.abs(x[2 * (n - 1):]) + 1e-6
-        tt = np.r_[0.0, np.cumsum(st)]
-        return c, tt / tt[-1]
+        return x[:nc].reshape(n - 1, 2), np.r_[0.0, x[nc:], 1.0]
 
     def residuals(x):
         c, tt = unpack(x)
@@ -245,14 +244,16 @@ def _polish(pts, t, inner, n):
         fold = _FOLD_WEIGHT * np.minimum(det - _FOLD_MARGIN, 0.0).ravel()  # only where it nearly folds
         return np.r_[fit, fold]
 
-    x0 = np.r_[inner.ravel(), steps0]
-    nc = 2 * (n - 1)
+    x0 = np.r_[inner.ravel(), t[1:-1]]
     sparsity = np.zeros((2 * k + _JAC_S.size * _JAC_V.size, x0.size), dtype=bool)
     sparsity[:, :nc] = True
-    for j in range(1, k):  # sample j depends on the parameter steps before it (normalised: all)
-        sparsity[2 * j:2 * j + 2, nc:] = True
-    res = least_squares(residuals, x0, jac_sparsity=sparsity, method="trf", x_scale="jac",
-                        max_nfev=60, xtol=1e-10, ftol=1e-10)
+    rows = np.arange(1, k - 1)
+    sparsity[2 * rows, nc + rows - 1] = True
+    sparsity[2 * rows + 1, nc + rows - 1] = True
+    lo = np.r_[np.full(nc, -np.inf), np.zeros(k - 2)]
+    hi = np.r_[np.full(nc, np.inf), np.ones(k - 2)]
+    res = least_squares(residuals, np.clip(x0, lo, hi), jac_sparsity=sparsity, bounds=(lo, hi), method="trf",
+                        x_scale="jac", max_nfev=60, xtol=1e-10, ftol=1e-10)
     return unpack(res.x)[0]
 
 

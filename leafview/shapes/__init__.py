@@ -4,8 +4,9 @@ The landmark model (:mod:`leafview.model.shapes`) describes a margin; :mod:`leaf
 fits the shader model Ω to it. The fits of the 62 catalogue entries are precomputed into
 ``assets/shapes/<name>.toml`` (plain leaf presets) with their errors in ``assets/shapes/fits.json``
 by ``tools/make_shapes.py`` (about a minute; a test checks the files still match the catalogue).
-Random instances (Fig. 8) are fitted when asked for: about 0.01-0.05 s each with the linear fit,
-up to a few seconds with the least-squares polish.
+Random instances (Fig. 8) are fitted when asked for, to within :data:`INSTANCE_TARGET`: about
+0.25 s each with the least-squares polish on llvmpipe's machine (2 cores), 0.025 s with the
+linear fit only (``polish=False``; then up to about 3.5 % off).
 
 ``leafview shapes`` (:mod:`leafview.shapes.cli`) lists and renders them; ``leafview bench shapes``
 (:mod:`leafview.shapes.bench`) measures generation and rendering rates.
@@ -21,7 +22,9 @@ from typing import Any
 
 from ..model.params import LeafParams, ParamError
 
-__all__ = ["ShapeFitInfo", "shapes_dir", "shape_names", "shapes_params", "fit_info", "fit_landmark_leaf"]
+INSTANCE_TARGET = 0.01   # random instances: the goal, 1 % of the leaf length
+
+__all__ = ["INSTANCE_TARGET", "ShapeFitInfo", "shapes_dir", "shape_names", "shapes_params", "fit_info", "fit_landmark_leaf"]
 
 
 @dataclass(frozen=True)
@@ -102,7 +105,7 @@ def shapes_params(name: str, seed: int | None = None, *, amount: float = 0.2, po
     from ..model.shapes import landmark_leaf, random_instance
 
     leaf = random_instance(landmark_leaf(name), int(seed), amount)
-    params = fit_landmark_leaf(leaf, polish=polish).params
+    params = fit_landmark_leaf(leaf, polish=polish, target=INSTANCE_TARGET).params
     return params.replace(name=f"{name}#{seed}")
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import UsageError
-from ..model.params import LeafParams, ParamError
+from ..model.params import LeafParams
 
 __all__ = ["add_arguments", "run", "SHAPES_GRID"]
 
@@ -170,7 +170,4 @@ def run(args: argparse.Namespace) -> int:
         if args.sheet or args.seed is not None:
             raise UsageError("--sheet and --seed render images: give -o FILE or -o DIR")
         return _list(names)
-    try:
-        return _render_shapes(args, names)
-    except ParamError:
-        raise
+    return _render_shapes(args, names)
