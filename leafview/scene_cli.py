@@ -138,10 +138,15 @@ def run(args: argparse.Namespace) -> int:
         save_scene(spec, args.save)
         say(f"wrote {args.save}: {len(scene):,} leaves, {len(spec.species)} species, seed {spec.seed}")
     if args.export:
-        from .export import export_scene  # provided by the export package
+        from .export import export_scene
+        from .gpu.scene import LOD_GRIDS
 
-        export_scene(scene, args.export)
-        say(f"wrote {args.export}")
+        # the grid the scene is drawn with up close, not the single-leaf default (33×65 would
+        # make 10⁴ varied leaves a 1.4 GB file)
+        with tqdm(total=len(scene) if scene.varied else len(scene.species), unit="shape", desc="baking",
+                  file=sys.stderr, disable=True if args.quiet else None, leave=False) as bar:
+            export_scene(scene, args.export, resolution=LOD_GRIDS[0], progress=bar.update)
+        say(f"wrote {args.export}: {len(scene):,} leaves baked at {LOD_GRIDS[0][0]}×{LOD_GRIDS[0][1]}")
     if args.output:
         from .gpu import default_renderer
         from .gpu.scene import CullSettings, SceneRenderer, scene_camera
@@ -162,7 +167,7 @@ def run(args: argparse.Namespace) -> int:
             image = renderer.render(scene_camera(scene, args.size, args.camera), args.size, settings)
             t_frame = time.perf_counter() - t2
             counts = renderer.level_counts()
-            tris = renderer.triangles()
+            tris = renderer.triangles(counts)
         finally:
             renderer.release()
         write_image(args.output, image, description=f"leafview scene: {len(scene):,} leaves, seed {spec.seed}")

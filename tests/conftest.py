@@ -24,6 +24,18 @@ PIXEL_TOL = 3               # llvmpipe varies by up to 3/255 between CPU vendors
 MAX_BAD_FRACTION = 0.005    # of the pixels may exceed PIXEL_TOL
 
 
+def run_prepare(gl, records: np.ndarray) -> np.ndarray:
+    """``records`` after the GPU prepare pass (leaf_prepare.comp) filled their derived members."""
+    from leafview.gpu.layout import LEAF_BLOCK
+
+    buf = gl.ctx.buffer(records.tobytes())
+    try:
+        gl.prepare.run(buf, len(records))
+        return np.frombuffer(buf.read(), dtype=LEAF_BLOCK.dtype)
+    finally:
+        buf.release()
+
+
 def compare(actual: np.ndarray, reference: np.ndarray) -> tuple[float, int]:
     """(fraction of pixels off by more than PIXEL_TOL, largest difference)."""
     diff = np.abs(actual.astype(np.int16) - reference.astype(np.int16)).max(axis=-1)

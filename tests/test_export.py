@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
-from conftest import require_or_skip
+from tests.conftest import require_or_skip
 
 import leafview
 from leafview.cli import main

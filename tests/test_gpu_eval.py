@@ -8,7 +8,7 @@ import leafview
 from leafview.gpu.layout import FRAME_BLOCK, LEAF_BLOCK, pack_leaf
 from leafview.model.leaf import grid_uv
 from leafview.model.params import Jitter
-from tests.conftest import random_params
+from tests.conftest import random_params, run_prepare
 
 pytestmark = pytest.mark.gl
 TOL = 2e-5
@@ -118,12 +118,7 @@ def test_prepare_pass_matches_reference(gl):
     leaves = [random_params(rng) for _ in range(70)]  # more than one 64-wide work group
     records, _ = pack_leaves(leaves)
     assert not records["axis"].any() and not records["heights"].any()  # the GPU fills them
-    buf = gl.ctx.buffer(records.tobytes())
-    try:
-        gl.prepare.run(buf, len(leaves))
-        out = np.frombuffer(buf.read(), dtype=LEAF_BLOCK.dtype)
-    finally:
-        buf.release()
+    out = run_prepare(gl, records)
     for rec, leaf in zip(out, leaves):
         p, q = axis_frames(leaf)
         np.testing.assert_allclose(rec["axis"][:, :3], p, atol=2e-6)

@@ -10,7 +10,7 @@ import pytest
 
 pytestmark = pytest.mark.gl
 
-from conftest import MAX_BAD_FRACTION, assert_matches_reference, compare  # noqa: E402
+from tests.conftest import MAX_BAD_FRACTION, assert_matches_reference, compare  # noqa: E402
 
 SIZE = 96
 CASES = [(name, "top") for name in ("ovate", "lanceolate", "orbicular", "acuminate", "asymmetric", "serrate",

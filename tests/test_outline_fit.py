@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 
 import leafview
-from leafview.gpu.layout import LEAF_BLOCK, pack_leaf, pack_leaves
+from leafview.gpu.layout import pack_leaf, pack_leaves
 from leafview.model.leaf import axis_frames, control_polygons, grid_uv, tilt_offsets
 from leafview.model.outline_fit import (fit_outline, hausdorff, jacobian_min, margin, outline_error,
                                         rows_from_controls, split_outline)
 from leafview.model.params import MAX_SILHOUETTE_ROWS, LeafParams, ParamError, Shape, parse_params
 from leafview.model.shapes import catalogue, landmark_leaf, outline, outline_sides
 from leafview.shapes import fit_info, shape_names, shapes_dir, shapes_params
+from tests.conftest import run_prepare
 
 TOL = 2e-5
 
@@ -216,12 +217,7 @@ def test_prepare_pass_fills_the_extended_rows(gl):
     rng = np.random.default_rng(8)
     leaves = [_extended(rng) for _ in range(12)] + [LeafParams()]
     records, _ = pack_leaves(leaves)
-    buf = gl.ctx.buffer(records.tobytes())
-    try:
-        gl.prepare.run(buf, len(leaves))
-        out = np.frombuffer(buf.read(), dtype=LEAF_BLOCK.dtype)
-    finally:
-        buf.release()
+    out = run_prepare(gl, records)
     for rec, leaf in zip(out[:-1], leaves[:-1]):
         n = leaf.shape.rows
         a, q = axis_frames(leaf)

@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from conftest import assert_matches_reference
+from tests.conftest import assert_matches_reference
 from leafview.cli import main
 from leafview.gpu.layout import LEAF_BLOCK, pack_leaf
 from leafview.model.params import LeafParams, ParamError
@@ -285,3 +285,16 @@ def test_cli_bad_scene_file(tmp_path, capsys):
     assert main(["scene", str(bad), "-o", str(out)]) == 2
     err = capsys.readouterr().err
     assert "bad.toml" in err and "scene.layout" in err and not out.exists()
+
+
+def test_bend_deviation_measures_the_shared_species_droop(presets):
+    """A varied bent leaf droops with its species' profile, not its own solve: the deviation is
+    reported (non-zero with variation, zero without)."""
+    from leafview.model.scene import bend_deviation
+
+    maize = (presets["maize"],)
+    varied = build_scene(SceneSpec(species=maize, leaves=60, seed=3, plants=1))
+    plain = build_scene(SceneSpec(species=maize, leaves=60, seed=3, plants=1, variation=0.0, colour_variation=0.0))
+    d = bend_deviation(varied, range(10))
+    assert 1e-4 < d < 0.1
+    assert bend_deviation(plain, range(10)) < 1e-12

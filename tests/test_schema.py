@@ -10,7 +10,7 @@ import tomllib
 import jsonschema
 import numpy as np
 import pytest
-from conftest import random_params
+from tests.conftest import random_params
 
 from leafview.model.params import LeafParams, ParamError, parse_params
 from leafview.resources import builtin_presets

@@ -181,7 +181,7 @@ class SceneView:
         imgui.text(f"drawn: {total:,} of {len(self.scene):,}")
         for (nu, nv), c in zip(self.renderer.grids, self.counts):
             imgui.text(f"  {nu}×{nv} grid: {int(c):,}")
-        imgui.text(f"triangles: {self.renderer.triangles():,}")
+        imgui.text(f"triangles: {self.renderer.triangles(self.counts):,}")
         imgui.end()
 
     # -- framebuffers -------------------------------------------------------------------------------

@@ -18,16 +18,16 @@ check they draw the same picture. Neither changes the framebuffer binding: bind 
 
 from __future__ import annotations
 
-from typing import Any, Iterable, Sequence
+from typing import Any, Sequence
 
 import moderngl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..camera import Camera
-from ..model.leaf import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table, tessellate
+from ..model.leaf import JITTER_TABLE_SIZE, grid_indices, grid_uv, tessellate
 from ..model.params import Jitter, LeafParams, Material, Shape, Transform
-from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, LEAVES_BINDING, feature_defines, pack_leaf, pack_leaves
+from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, LEAVES_BINDING, feature_defines, pack_leaves
 from .prepare import LeafPrepare
 from .ripple import RipplePass
 from .renderer import Lighting, fill_frame

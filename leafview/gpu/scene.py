@@ -353,13 +353,11 @@ class SceneRenderer:
         fill_frame(self._frame, camera, srgb=srgb, lighting=lighting)
         self.frame_ubo.write(self._frame.tobytes())
 
-    def _cull(self, batch: _SceneBatch, settings: CullSettings) -> None:
-        batch.commands.write(batch.reset.tobytes())
+    def _set_cull_uniforms(self, settings: CullSettings) -> None:
+        """Camera and settings uniforms of the culling pass: once per frame, for every batch."""
         cam = self.camera
-        planes = frustum_planes(cam.proj @ cam.view).astype(np.float32)
         s = self.cull
-        s["count"] = batch.count
-        s["planes"].write(planes.tobytes())
+        s["planes"].write(frustum_planes(cam.proj @ cam.view).astype(np.float32).tobytes())
         s["eye"] = tuple(float(x) for x in (cam.eye if cam.perspective else (*cam.eye[:3], 0.0)))
         s["pixel_scale"] = _pixel_scale(cam, self.size)
         s["min_pixels"] = settings.min_pixels
@@ -367,9 +365,14 @@ class SceneRenderer:
         s["levels"] = len(self.grids)
         s["forced_level"] = settings.forced_level
         s["frustum"] = settings.cull
+        self.species_ssbo.bind_to_storage_buffer(SPECIES_BINDING)
+
+    def _cull(self, batch: _SceneBatch) -> None:
+        batch.commands.write(batch.reset.tobytes())
+        s = self.cull
+        s["count"] = batch.count
         batch.rows.bind_to_storage_buffer(LEAVES_BINDING)
         batch.species_of.bind_to_storage_buffer(SPECIES_OF_BINDING)
-        self.species_ssbo.bind_to_storage_buffer(SPECIES_BINDING)
         batch.commands.bind_to_storage_buffer(COMMANDS_BINDING)
         batch.visible.bind_to_storage_buffer(VISIBLE_BINDING)
         s.run(group_x=-(-batch.count // _LOCAL))
@@ -384,8 +387,9 @@ class SceneRenderer:
             self.stems.render(moderngl.TRIANGLES)
         self.jitter_tex.use(location=0)
         self.ripples.bind()
+        self._set_cull_uniforms(settings)
         for batch in self.batches:
-            self._cull(batch, settings)
+            self._cull(batch)
             batch.rows.bind_to_storage_buffer(LEAVES_BINDING)
             batch.vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=len(self.grids))
 
@@ -406,10 +410,11 @@ class SceneRenderer:
                 out[batch.start + vis[k * batch.count:k * batch.count + int(c)]] = k
         return out
 
-    def triangles(self) -> int:
-        """Leaf triangles drawn in the last :meth:`draw`."""
+    def triangles(self, counts: NDArray[np.int64] | None = None) -> int:
+        """Leaf triangles drawn in the last :meth:`draw`, from ``counts`` (as
+        :meth:`level_counts` returned them) or read back."""
         per = np.array([2 * (nu - 1) * (nv - 1) for nu, nv in self.grids])
-        return int(self.level_counts() @ per)
+        return int((self.level_counts() if counts is None else counts) @ per)
 
     def capture(self, leaves: Sequence[int], level: int = 0) -> NDArray[np.float32]:
         """Leaf-space positions that ``leaf.vert`` computes for the given leaves at ``level``'s

@@ -24,6 +24,8 @@ measures both.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -245,7 +247,7 @@ def _arclength_inverse(curve, samples: int = 2049) -> tuple[NDArray[np.float64],
 
 
 @dataclass
-class _Path:
+class _Path(ABC):
     """Shared sampling of a path in leaf space; subclasses define :meth:`__call__`."""
 
     space: LeafSpace
@@ -253,8 +255,9 @@ class _Path:
     originals: list[LandmarkLeaf]
     _table: tuple | None = field(default=None, init=False, repr=False)
 
-    def __call__(self, u: ArrayLike) -> NDArray[np.float64]:  # pragma: no cover - abstract
-        raise NotImplementedError
+    @abstractmethod
+    def __call__(self, u: ArrayLike) -> NDArray[np.float64]:
+        """Points of the path (shape vectors) at curve parameters ``u``."""
 
     @property
     def vectors(self) -> NDArray[np.float64]:

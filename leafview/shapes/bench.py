@@ -104,22 +104,19 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
         rings = [outline(leaf, 128) for leaf in leaves]
         res["landmark_per_s"] = n_fast / (time.perf_counter() - t0)
 
-        fast, t_fast = [], []
-        for ring in rings:
-            t = time.perf_counter()
-            fast.append(fit_outline(ring, polish=False))
-            t_fast.append(time.perf_counter() - t)
-        res["fit_fast_per_s"] = 1.0 / statistics.mean(t_fast)
-        res["fit_fast_error_median"] = statistics.median(f.error for f in fast)
-        res["fit_fast_error_max"] = max(f.error for f in fast)
-        polished, t_pol = [], []
-        for ring in rings[:n_polish]:
-            t = time.perf_counter()
-            polished.append(fit_outline(ring, target=INSTANCE_TARGET))
-            t_pol.append(time.perf_counter() - t)
-        res["fit_polished_per_s"] = 1.0 / statistics.mean(t_pol)
-        res["fit_polished_error_median"] = statistics.median(f.error for f in polished)
-        res["fit_polished_error_max"] = max(f.error for f in polished)
+        def timed_fits(key: str, outlines: list, **options: Any) -> list:
+            fits, times = [], []
+            for ring in outlines:
+                t = time.perf_counter()
+                fits.append(fit_outline(ring, **options))
+                times.append(time.perf_counter() - t)
+            res[f"fit_{key}_per_s"] = 1.0 / statistics.mean(times)
+            res[f"fit_{key}_error_median"] = statistics.median(f.error for f in fits)
+            res[f"fit_{key}_error_max"] = max(f.error for f in fits)
+            return fits
+
+        fast = timed_fits("fast", rings, polish=False)
+        timed_fits("polished", rings[:n_polish], target=INSTANCE_TARGET)
         res["fit_extended_fraction"] = float(np.mean([not f.quartic for f in fast]))
 
         count = 1000 if quick else 10000
