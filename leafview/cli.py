@@ -25,6 +25,7 @@ _VIEWS = ("top", "front", "three-quarter", "side")
 # input (exit 2) and writes no partial file.
 COMMANDS: dict[str, tuple[str, str]] = {
     "export": ("leafview.export.cli", "bake leaves or a scene into .glb/.gltf/.obj/.ply/.usda/.usdc"),
+    "morph": ("leafview.shapes.morph_cli", "morph one leaf shape into another: frames, contact sheet, smoothness"),
     "scene": ("leafview.scene_cli", "render, save, export or view a scene of many leaves"),
     "shapes": ("leafview.shapes.cli", "list or render the botanical shape catalogue, or a multilobed leaf"),
 }

@@ -34,6 +34,7 @@ from .imgui_gl import ImguiRenderer
 from .input import ViewportInput
 from .orbit import OrbitCamera
 from .overlay import Overlay
+from .morph_panel import MorphPanel
 from .panel import ParamPanel
 from .state import ViewerState
 
@@ -106,6 +107,7 @@ class Viewer:
             self.release()
             raise
         self.panel = ParamPanel(state, unicode_labels=self.unicode_labels)
+        self.morph = MorphPanel(state)
         self.files = FileBar(state, builtin_presets())
         self.camera = OrbitCamera(target=np.zeros(3))
         self.input = ViewportInput(self)
@@ -221,6 +223,7 @@ class Viewer:
         self.files.draw()
         imgui.separator()
         self.panel.draw_edits()
+        self.morph.draw()
         self.panel.draw_groups()
         self.panel.draw_view()
         imgui.pop_item_width()

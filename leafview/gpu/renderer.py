@@ -252,12 +252,15 @@ class LeafRenderer:
 
     def render_many(self, leaves: Sequence[LeafParams], size: Any = (256, 256), view: str = "top",
                     background: ArrayLike | None = None, *, grid: tuple[int, int] = DEFAULT_GRID,
-                    samples: int | None = None, linear: bool = False) -> list[NDArray[Any]]:
+                    samples: int | None = None, linear: bool = False,
+                    camera: Camera | None = None) -> list[NDArray[Any]]:
         """Render several leaves, each framed on its own, in few GPU round trips.
 
         The vertices of every leaf are first captured from the vertex shader in one pass (so the
         framing uses exactly the drawn vertices), then all leaves are drawn into tiles of one
         atlas, resolved and read back once per chunk of up to :data:`BATCH` leaves.
+        ``camera`` (from :func:`leafview.camera.frame_view`) replaces the per-leaf framing with one
+        camera for all (frame sequences that must not jump in scale); ``view`` still names it.
         """
         w, h = _check_size(size)
         if view not in VIEWS:
@@ -273,11 +276,12 @@ class LeafRenderer:
         images: list[NDArray[Any]] = []
         for start in range(0, len(leaves), chunk):
             images += self._render_chunk(leaves[start:start + chunk], w, h, view, bg, (nu, nv), samples,
-                                         linear, cols)
+                                         linear, cols, camera)
         return images
 
     def _render_chunk(self, leaves: Sequence[LeafParams], w: int, h: int, view: str, bg: tuple[float, ...],
-                      grid: tuple[int, int], samples: int, linear: bool, max_cols: int) -> list[NDArray[Any]]:
+                      grid: tuple[int, int], samples: int, linear: bool, max_cols: int,
+                      camera: Camera | None = None) -> list[NDArray[Any]]:
         n = len(leaves)
         records, tables = pack_leaves(leaves)
         self._upload_jitter(tables)
@@ -296,6 +300,9 @@ class LeafRenderer:
         positions = self._capture_rows(leaf_stride, n, grid, entry[1])
         frames = np.zeros(n, dtype=FRAME_BLOCK.dtype)
         for i, leaf in enumerate(leaves):
+            if camera is not None:
+                fill_frame(frames[i], camera, srgb=not linear)
+                continue
             m = leaf.transform.matrix()
             world = positions[i * nverts:(i + 1) * nverts].astype(np.float64) @ m[:3, :3].T + m[:3, 3]
             fill_frame(frames[i], frame_view(view, world, (w, h)), srgb=not linear)

@@ -21,10 +21,20 @@ from pathlib import Path
 from typing import Any
 
 from ..model.params import LeafParams, ParamError
+from ..model.shapes import ShapeEntry, landmark_leaf
+from ..model.shapes import catalogue as _catalogue
 
 INSTANCE_TARGET = 0.01   # random instances: the issue's goal, 1 % of the leaf length
 
-__all__ = ["INSTANCE_TARGET", "ShapeFitInfo", "shapes_dir", "shape_names", "shapes_params", "fit_info", "fit_landmark_leaf"]
+__all__ = ["INSTANCE_TARGET", "ShapeEntry", "ShapeFitInfo", "catalogue", "landmark_leaf", "shapes_dir",
+           "shape_names", "shapes_params", "fit_info", "fit_landmark_leaf"]
+
+
+def catalogue() -> list[ShapeEntry]:
+    """The 62 catalogue shapes (Garg & Leow Table 1 and Fig. 5) as :class:`ShapeEntry` rows:
+    ``name``, ``waist``, ``base``, ``apex``, ``unilobed``, ``table1``, ``named`` and the recipe.
+    Same list as :func:`leafview.model.shapes.catalogue`; :func:`fit_info` gives each one's fit."""
+    return _catalogue()
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,173 @@
+"""``leafview morph`` (frames, contact sheet, smoothness report), the viewer's morph controller and
+panel, and the public names ``leafview.landmarks`` / ``leafview.shapes.catalogue``."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from leafview.cli import main
+from leafview.imaging import PARAMS_ATTRIBUTE, read_image
+from leafview.model.morph import keyframe_path, leaf_vector, morph_path, smoothness
+from leafview.model.params import LeafParams, ParamError
+from leafview.model.shapes import landmark_leaf, load_landmark_leaf
+from leafview.resources import asset_dir
+from leafview.shapes.morph import RefSpec, load_morph_leaf, morph_sequence, parse_ref, shared_camera
+
+
+def test_public_names_from_the_issue():
+    import leafview.landmarks as lm
+    import leafview.model.landmarks as model_lm
+    from leafview.shapes import catalogue
+
+    assert lm.fit_margin is model_lm.fit_margin and set(lm.__all__) == set(model_lm.__all__)
+    rows = catalogue()
+    assert len(rows) == 62 and sum(r.table1 for r in rows) == 50 and sum(r.named for r in rows) == 14
+    first = rows[0]
+    assert (first.name, first.waist, first.base, first.apex, first.unilobed) == \
+        ("elliptic-concave-concave", "elliptic", "concave", "concave", True)
+
+
+def test_parse_ref():
+    assert parse_ref("cordate:2.5") == RefSpec("cordate", 2.5)
+    assert parse_ref("cordate") == RefSpec("cordate", 1.0)
+    assert parse_ref("dir/c.toml:0") == RefSpec("dir/c.toml", 0.0)
+    for bad in ("cordate:x", "cordate:-1", "cordate:nan", "cordate:inf"):
+        with pytest.raises(ParamError, match="--ref"):
+            parse_ref(bad)
+
+
+def test_landmark_examples_load_and_an_omega_preset_is_refused_with_the_reason():
+    files = sorted((asset_dir() / "landmarks").glob("*.toml"))
+    assert len(files) >= 3
+    for f in files:
+        assert load_morph_leaf(str(f), "A").name == f.stem
+    with pytest.raises(ParamError, match="shader-model preset") as err:
+        load_morph_leaf(str(asset_dir() / "presets" / "ovate.toml"), "A")
+    assert err.value.path == "A"
+
+
+def test_sequence_ends_are_the_shapes_and_fits_are_close():
+    src, tgt = landmark_leaf("lanceolate"), landmark_leaf("cordate")
+    seq = morph_sequence(src, tgt, [(landmark_leaf("oblong"), 2.0)], 5, polish=False)
+    assert seq.leaves[0] == src and seq.leaves[-1] == tgt
+    path = morph_path(src, tgt, [("oblong", 2.0)])
+    np.testing.assert_allclose(seq.vectors[[0, -1]], path.vectors[[0, -1]], atol=1e-12)
+    assert len(leaf_vector(src)) < path.space.dim    # the tail was inserted into the lanceolate leaf (eq. 10)
+    assert len(seq.params) == 5 and all(isinstance(p, LeafParams) for p in seq.params)
+    assert max(seq.errors) < 0.04          # linear fit only
+    nurbs = smoothness(morph_path(src, tgt, [("oblong", 2.0)]).frame_vectors(5))
+    assert seq.smoothness == nurbs
+    key = smoothness(keyframe_path(src, tgt, [("oblong", 2.0)]).frame_vectors(5, by="parameter"))
+    assert seq.keyframe_smoothness == key
+    assert len(seq.reference_distances) == 1 and seq.reference_distances[0] > 0
+
+
+def test_shared_camera_frames_the_union_of_all_frames():
+    from leafview.camera import frame_view
+    from leafview.shapes import shapes_params
+
+    small, wide = shapes_params("linear"), shapes_params("reniform")
+    cam = shared_camera([small, wide], "top", (100, 100))
+    assert np.allclose(cam.proj, shared_camera([wide, small], "top", (100, 100)).proj)
+    own = frame_view("top", np.array([[-0.04, 0.0, 0.0], [0.04, 1.0, 0.0]]), (100, 100))
+    # the wide leaf decides the scale: the linear leaf is drawn smaller than on its own
+    assert cam.proj[0, 0] < own.proj[0, 0]
+
+
+@pytest.mark.gl
+def test_cli_writes_frames_sheet_and_report(gl, tmp_path, capsys):
+    out = tmp_path / "m"
+    rc = main(["morph", "lanceolate", "reniform", "--ref", "obcordate:1", "--frames", "6", "-o", str(out),
+               "--size", "64", "--presets", "-q"])
+    assert rc == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert names == [f"frame_{i}.{ext}" for i in range(6) for ext in ("png", "toml")] + ["morph.json", "sheet.png"]
+    report = json.loads((out / "morph.json").read_text())
+    assert report["frames"] == 6 and report["method"] == "nurbs" and report["refs"] == [{"spec": "obcordate", "weight": 1.0}]
+    assert max(f["fit_error"] for f in report["frame"]) <= 0.01
+    assert report["smoothness"]["max_step"] < report["keyframe_smoothness"]["max_step"]
+    # frames: the leaf covers a growing share of the shared frame from lanceolate to reniform
+    cover = []
+    for i in range(6):
+        img, meta = read_image(out / f"frame_{i}.png")
+        assert img.shape == (64, 64, 4)
+        cover.append((img[..., 3] > 0).mean())
+        saved = LeafParams.from_dict(json.loads(meta[PARAMS_ATTRIBUTE]))
+        assert saved == LeafParams.load(out / f"frame_{i}.toml")
+    assert cover[0] < 0.5 * cover[-1] and cover[0] > 0.02
+    sheet, _ = read_image(out / "sheet.png")
+    assert sheet.shape[1] == 6 * 64 and (sheet[..., 3] == 255).all()
+    text = capsys.readouterr().out
+    assert "NURBS path" in text and "linear key-framing" in text and "20 dimensions" in text
+
+
+@pytest.mark.parametrize("args, message", [
+    (["lanceolate", "nosuchshape"], "nosuchshape"),
+    (["lanceolate", "cordate", "--ref", "oblong:-2"], "--ref"),
+    (["lanceolate", "cordate", "--frames", "1"], "--frames"),
+    (["lanceolate", "cordate", "-o", "x.png"], "directory"),
+    (["PRESET", "cordate"], "shader-model preset"),
+])
+def test_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, args, message):
+    args = [str(asset_dir() / "presets" / "ovate.toml") if a == "PRESET" else a for a in args]
+    if "-o" not in args:
+        args += ["-o", str(tmp_path / "out")]
+    else:
+        args[args.index("-o") + 1] = str(tmp_path / "x.png")
+    assert main(["morph", *args, "-q"]) == 2
+    assert message in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- the viewer's morph controller and panel ------------------------------------------------------
+
+@pytest.fixture
+def state(presets):
+    from leafview.app.state import ViewerState
+    from leafview.resources import builtin_presets, preset_dir
+
+    return ViewerState(presets["ovate"], builtin_presets()["ovate"], builtin_dir=preset_dir())
+
+
+def test_controller_changes_only_the_shape_and_hits_the_ends(state):
+    from leafview.app.morph_panel import MorphController
+    from leafview.shapes.morph import fit_frame
+
+    before = state.params
+    c = MorphController(state, source="lanceolate", target="cordate")
+    assert c.set_t(1.0)
+    assert state.params.shape == fit_frame(landmark_leaf("cordate"))[0].shape
+    assert state.params.material == before.material and state.params.bending == before.bending
+    assert c.last_error is not None and c.last_error <= 0.01
+    c.end_drag()
+    assert state.undo() and state.params == before and not state.can_undo
+    with pytest.raises(ValueError, match="target"):
+        c.choose(target="nosuchshape")
+
+
+def test_panel_t_slider_drag_is_one_undo_step(state):
+    from tests.test_viewer_panel import UI
+
+    from leafview.app.morph_panel import MorphPanel
+
+    ui = UI()
+    try:
+        panel = MorphPanel(state)
+        panel.expand_all = True
+        ui.frame(panel.draw)
+        for key in ("morph.source", "morph.target", "morph.reference", "morph.t"):
+            x0, y0, x1, y1 = panel.rects[key]
+            assert x1 > x0 and y1 > y0
+        before = state.params
+        ui.drag(panel.draw, panel.rects["morph.t"], 0.0, 0.5)
+        c = panel.controller
+        assert 0.35 < c.t < 0.65
+        # after release the shape is the polished fit of the frame at t
+        expected = c.shape_at(c.t, polish=True)
+        assert state.params.shape == expected and state.params.shape != before.shape
+        assert state.undo() and state.params == before and not state.can_undo
+    finally:
+        ui.close()
