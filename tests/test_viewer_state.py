@@ -168,6 +168,38 @@ def test_dragged_handle_lands_where_it_is_dropped(presets, name):
         np.testing.assert_allclose(edge, s_curve, atol=1e-9)
 
 
+def test_every_handle_of_extended_tilted_silhouettes_follows_the_cursor():
+    """Catalogue shapes with 4-7 silhouette rows and tilted rows get a handle per row; dropping a
+    handle where it is changes nothing, and a moved handle lands exactly where it was dropped (its
+    foot stays, its length and tilt follow), the other half mirroring it."""
+    from leafview.app.handles import handle_names
+    from leafview.shapes import fit_info, shape_names, shapes_params
+
+    picks = {}
+    for name in shape_names():
+        info = fit_info(name)
+        picks.setdefault((info.rows, not info.quartic and info.rows == 3), name)
+    assert {rows for rows, _ in picks} >= {3, 4, 5, 6, 7}
+    for shape in picks.values():
+        params = shapes_params(shape)
+        names = handle_names(params)
+        assert len(names) == 2 + 2 * params.shape.rows
+        assert params.shape.extended or params.shape.rows == 3
+        for name in names[2:]:
+            here = handle_points(params)[name]
+            same = drag_handle(params, name, here)
+            np.testing.assert_allclose(same.shape.silhouette, params.shape.silhouette, atol=2e-3, err_msg=shape)
+            target = here + np.array([0.01, -0.004, 0.0])
+            moved = drag_handle(params, name, target)
+            np.testing.assert_allclose(handle_points(moved)[name][:2], target[:2], atol=1e-9,
+                                       err_msg=f"{shape} {name}")
+            other = name[:-1] + ("-" if name.endswith("+") else "+")
+            mirror = handle_points(moved)[other] - handle_points(params)[other]
+            if params.shape.extended:     # the foot stays; both halves follow the new row
+                assert moved.shape.vbar.tolist() == params.shape.vbar.tolist()
+                assert np.abs(mirror[:2]).max() > 1e-3
+
+
 def test_silhouette_drag_keeps_v_order(presets):
     params = presets["ovate"]
     far = handle_points(params)["s3+"] + np.array([0.0, -0.9, 0.0])  # past s2 and s1

@@ -1,14 +1,18 @@
 """Direct manipulation (seed 004 sec. 6, Fig. 7): the draggable control points in the viewport.
 
 Handles are the two free axis control points ``a1``, ``a2`` (dragging them sideways skews the
-leaf: asymmetry, Fig. 7b) and the three inner silhouette control points of each half, ``s1+`` ..
-``s3-`` (outline, Fig. 7c-d). A drag moves the handle within the leaf plane (z of leaf space is
-kept); :func:`drag_handle` turns the new leaf-space position back into parameters:
+leaf: asymmetry, Fig. 7b) and the N inner silhouette control points of each half, ``s1+`` ..
+``sN-`` (outline, Fig. 7c-d; N = 3 for the paper's quartic, up to 7 for an extended silhouette).
+A drag moves the handle within the leaf plane (z of leaf space is kept); :func:`drag_handle` turns
+the new leaf-space position back into parameters:
 
 * ``a1``/``a2``: the control point's x and y;
-* ``sK±``: v̄_K is the axis parameter whose in-plane normal line passes through the point
-  (eq. 3: ``s = A(v̄) + σ x̄s n(v̄) + z̄s ẑ``), kept strictly between its neighbours, and x̄s the
-  signed distance along σ·n(v̄), so both halves follow (the model is symmetric in x̄s).
+* ``sK±`` of the paper's quartic: v̄_K is the axis parameter whose normal line passes through the
+  point (eq. 3: ``s = A(v̄) + σ x̄s n(v̄) + z̄s ẑ``), kept strictly between its neighbours, and x̄s
+  the signed distance along σ·n(v̄), so both halves follow (the model is symmetric in x̄s);
+* ``sK±`` of an extended silhouette (more rows or tilted rows): the foot A(v̄_K) stays and the
+  row's x̄s and tilt φ_K follow the point; the row leaves A(v̄) in the direction
+  ``σ cos φ n(v̄) - sin φ t(v̄)``, so the other half mirrors the change.
 
 When the leaf bends (``params.bending``), handles and control polygons are shown bent with the
 midrib (:class:`LeafFrame`), and a drag is mapped back through the bend at the handle's axis
@@ -19,6 +23,7 @@ numpy only; the viewport projects these points and calls :func:`pick`.
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 from typing import Any, Iterable
 
@@ -26,23 +31,29 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from ..model.bezier import bernstein, derivative_points
-from ..model.edits import set_silhouette_point
+from ..model.edits import set_silhouette_point, set_silhouette_row
 from ..model.leaf import control_polygons
 from ..model.params import LeafParams, ParamError
 
-__all__ = ["HANDLE_NAMES", "handle_points", "handle_parameters", "LeafFrame", "pick", "drag_handle",
+__all__ = ["HANDLE_NAMES", "handle_names", "handle_points", "handle_parameters", "LeafFrame", "pick", "drag_handle",
            "to_world", "to_leaf_space", "plane_hit", "drag_plane_normal", "V_GAP"]
 
-HANDLE_NAMES = ("a1", "a2", "s1+", "s2+", "s3+", "s1-", "s2-", "s3-")
+HANDLE_NAMES = ("a1", "a2", "s1+", "s2+", "s3+", "s1-", "s2-", "s3-")   # the paper's quartic (N = 3)
 V_GAP = 0.01          # smallest spacing kept between consecutive v̄ while dragging
 _V_SAMPLES = 2001
+
+
+def handle_names(params: LeafParams) -> tuple[str, ...]:
+    """``a1``, ``a2``, then ``s1+`` .. ``sN+`` and ``s1-`` .. ``sN-`` for N silhouette rows."""
+    rows = range(1, params.shape.rows + 1)
+    return ("a1", "a2", *(f"s{k}+" for k in rows), *(f"s{k}-" for k in rows))
 
 
 def handle_points(params: LeafParams) -> dict[str, NDArray[np.float64]]:
     """Leaf-space positions of every handle (the points drawn in the control polygons)."""
     polys = control_polygons(params)
     out = {"a1": polys["A"][1], "a2": polys["A"][2]}
-    for k in range(3):
+    for k in range(params.shape.rows):
         out[f"s{k + 1}+"] = polys["S+"][k + 1]
         out[f"s{k + 1}-"] = polys["S-"][k + 1]
     return out
@@ -177,6 +188,23 @@ def _axis(params: LeafParams, v: NDArray[np.float64]) -> tuple[NDArray[np.float6
     return a, m / np.linalg.norm(m, axis=-1, keepdims=True)
 
 
+def _drag_tilted_row(params: LeafParams, k: int, sigma: float, p: NDArray[np.float64]) -> LeafParams:
+    """Extended silhouettes: the foot A(v̄_k) stays, the row's length x̄s and tilt φ follow the
+    point (polar coordinates in the frame σ n(v̄), -t(v̄) of eq. 3 with tilt; φ kept in
+    [-90°, 90°] by letting x̄s change sign). Fitted extended silhouettes often place feet 1e-3
+    apart, so moving the foot would jam against its neighbours."""
+    a, n = _axis(params, np.array([params.shape.vbar[k]]))
+    t = np.array([n[0, 1], -n[0, 0]])
+    rel = p[:2] - a[0, :2]
+    c, s = float(np.dot(rel, sigma * n[0, :2])), float(np.dot(rel, -t))
+    r, phi = math.hypot(c, s), math.degrees(math.atan2(s, c))
+    if phi > 90.0:
+        r, phi = -r, phi - 180.0
+    elif phi < -90.0:
+        r, phi = -r, phi + 180.0
+    return set_silhouette_row(params, k, x=r, tilt=phi)
+
+
 def drag_handle(params: LeafParams, name: str, leaf_point: ArrayLike) -> LeafParams:
     """New parameters with handle ``name`` moved to ``leaf_point`` (leaf space; its z is ignored:
     handles move in the leaf plane). Raises :class:`ParamError` for an unknown handle or a
@@ -190,22 +218,42 @@ def drag_handle(params: LeafParams, name: str, leaf_point: ArrayLike) -> LeafPar
 
         old = getattr(sh, name)
         return with_field(params, f"shape.{name}", [float(p[0]), float(p[1]), old[2]])
-    if name not in HANDLE_NAMES:
-        raise ParamError(name, f"unknown handle (known: {', '.join(HANDLE_NAMES)})")
-    k = int(name[1]) - 1
+    names = handle_names(params)
+    if name not in names:
+        raise ParamError(name, f"unknown handle (known: {', '.join(names)})")
+    k = int(name[1:-1]) - 1
     sigma = 1.0 if name.endswith("+") else -1.0
+    if sh.extended:
+        return _drag_tilted_row(params, k, sigma, p)
     vbar = sh.vbar
-    lo = (vbar[k - 1] if k > 0 else 0.0) + V_GAP
-    hi = (vbar[k + 1] if k < 2 else 1.0) - V_GAP
+    # keep V_GAP to the neighbours, or the spacing the leaf already has where that is smaller
+    # (fitted silhouettes may place feet 1e-3 apart)
+    below = vbar[k - 1] if k > 0 else 0.0
+    above = vbar[k + 1] if k < sh.rows - 1 else 1.0
+    lo = below + min(V_GAP, 0.5 * (vbar[k] - below))
+    hi = above - min(V_GAP, 0.5 * (above - vbar[k]))
     if lo >= hi:
         return params
+    phi = float(sh.phi[k]) if sh.extended else 0.0
     v = np.linspace(lo, hi, _V_SAMPLES)
     a, n = _axis(params, v)
     rel = p[:2] - a[:, :2]
-    # the point lies on the normal line at v̄ where its tangential offset vanishes: take the
-    # smallest |offset along the tangent| (ties broken towards the current v̄)
-    tangent = np.stack([n[:, 1], -n[:, 0]], axis=-1)
-    along = np.abs(np.sum(rel * tangent, axis=-1))
-    i = int(np.argmin(along + 1e-6 * np.abs(v - vbar[k])))
-    x = float(np.dot(rel[i], n[i, :2])) * sigma
-    return set_silhouette_point(params, k, v=float(v[i]), x=x)
+    tangent = np.stack([n[:, 1], -n[:, 0]], axis=-1)           # unit axis tangent t(v)
+    direction = sigma * np.cos(phi) * n[:, :2] - np.sin(phi) * tangent
+    across = np.stack([-direction[:, 1], direction[:, 0]], axis=-1)
+    # the point lies on the row line at v̄ where its offset across that line vanishes: take the
+    # smallest |offset| (ties broken towards the current v̄)
+    signed = np.sum(rel * across, axis=-1)
+    i = int(np.argmin(np.abs(signed) + 1e-6 * np.abs(v - vbar[k])))
+    vi = float(v[i])
+    # between samples: the zero of the linear interpolation of the signed offset (steep or nearly
+    # axial tilted row lines move far along themselves per sample)
+    for j in (i - 1, i):
+        if 0 <= j < len(v) - 1 and signed[j] * signed[j + 1] < 0.0:
+            vi = float(v[j] + (v[j + 1] - v[j]) * signed[j] / (signed[j] - signed[j + 1]))
+            break
+    a1, n1 = _axis(params, np.array([vi]))
+    t1 = np.array([n1[0, 1], -n1[0, 0]])
+    d1 = sigma * np.cos(phi) * n1[0, :2] - np.sin(phi) * t1
+    x = float(np.dot(p[:2] - a1[0, :2], d1))
+    return set_silhouette_point(params, k, v=vi, x=x)

@@ -18,7 +18,7 @@ from ..gpu.shaders import build_program
 from ..model.bezier import bernstein
 from ..model.leaf import control_polygons
 from ..model.params import LeafParams
-from .handles import HANDLE_NAMES, LeafFrame, handle_parameters, handle_points
+from .handles import HANDLE_NAMES, LeafFrame, handle_names, handle_parameters, handle_points
 
 __all__ = ["Overlay", "CURVE_COLORS", "control_lines", "ground_lines"]
 
@@ -104,6 +104,7 @@ class Overlay:
             return
         self._key = key
         self.frame = LeafFrame(params)
+        self.handle_names = handle_names(params)
         self._lines = control_lines(params, self.frame)
         hp, hv = handle_points(params), handle_parameters(params)
         self.handle_v = np.array([hv[n] for n in self.handle_names])

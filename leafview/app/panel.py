@@ -216,7 +216,7 @@ class ParamPanel:
             self._absolute_slider(f"curve{curve}", f"{curve} curvature (z̄{curve.lower()})"
                                   if self.unicode_labels else f"{curve} curvature (z{curve.lower()})",
                                   sum(zs) / 3, lambda p, z, c=curve: curve_longitudinal(p, c, z))
-        imgui.text_disabled("drag the white handles in the viewport:\na1, a2 skew the axis; s1-s3 shape the outline")
+        imgui.text_disabled("drag the white handles in the viewport:\na1, a2 skew the axis; s1..sN shape the outline")
 
     # -- view settings (not saved with the leaf) ------------------------------------------------
     def draw_view(self) -> None:

@@ -50,17 +50,32 @@ def skew_axis(params: LeafParams, dx1: float, dx2: float | None = None) -> LeafP
 
 def set_silhouette_point(params: LeafParams, index: int, *, v: float | None = None,
                          x: float | None = None) -> LeafParams:
-    """Silhouette shape (Fig. 7c-d): place silhouette control point ``index`` (0..2) at axis
-    parameter ``v`` and lateral distance ``x`` (either may be left as is). v̄ must stay strictly
-    increasing inside (0, 1); a violating edit raises :class:`ParamError`."""
-    if index not in (0, 1, 2):
-        raise ParamError("index", f"silhouette control point index must be 0, 1 or 2, got {index!r}")
+    """Silhouette shape (Fig. 7c-d): place silhouette control point ``index`` (0..N-1 for N rows)
+    at axis parameter ``v`` and lateral distance ``x`` (either may be left as is). v̄ must stay
+    strictly increasing inside (0, 1); a violating edit raises :class:`ParamError`."""
+    rows_n = params.shape.rows
+    if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < rows_n:
+        raise ParamError("index", f"silhouette control point index must be 0..{rows_n - 1}, got {index!r}")
     rows = [list(r) for r in params.shape.silhouette]
     if v is not None:
         rows[index][0] = _finite("v", v)
     if x is not None:
         rows[index][1] = _finite("x", x)
     return _shape(params, silhouette=rows)
+
+
+def set_silhouette_row(params: LeafParams, index: int, *, x: float, tilt: float) -> LeafParams:
+    """Extended silhouettes: give row ``index`` the lateral distance ``x`` (x̄s) and tilt ``tilt``
+    (degrees, -90..90) with its foot v̄ kept, so its control point can reach any point of the
+    leaf plane (eq. 3 with tilt). The result is re-validated like every edit."""
+    rows_n = params.shape.rows
+    if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < rows_n:
+        raise ParamError("index", f"silhouette row index must be 0..{rows_n - 1}, got {index!r}")
+    rows = [list(r) for r in params.shape.silhouette]
+    rows[index][1] = _finite("x", x)
+    tilts = list(params.shape.tilt) if params.shape.tilt else [0.0] * rows_n
+    tilts[index] = _finite("tilt", tilt)
+    return _shape(params, silhouette=rows, tilt=tilts)
 
 
 def curve_axis(params: LeafParams, z1: float, z2: float | None = None) -> LeafParams:
