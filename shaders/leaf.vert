@@ -34,14 +34,19 @@ flat out vec4 v_front;      // rgb, translucency
 flat out vec3 v_back;
 
 void main() {
-    LeafEval e = leaf_eval(jitter_table, in_uv);
-    vec3 n = leaf_normal(e, in_uv.y);
+    // one half only (shape.half = ±1, e.g. each side of an asymmetric leaf): the grid's u in
+    // [-1, 1] spreads over [0, 1] or [-1, 0], u' = (u + half) / 2 (leafview.model.leaf.drawn_uv)
+    vec2 uv = in_uv;
+    float half_side = LEAF.back.w;
+    if (half_side != 0.0) uv.x = 0.5 * (uv.x + half_side);  // keeps the winding (front faces)
+    LeafEval e = leaf_eval(jitter_table, uv);
+    vec3 n = leaf_normal(e, uv.y);
     v_object = e.L;
     v_object_normal = n;
     vec4 world = LEAF.model * vec4(e.L, 1.0);
     v_world = world.xyz;
     v_normal = normalize(mat3(LEAF.model) * n);  // rotation and uniform scale only
-    v_uv = in_uv;
+    v_uv = uv;
     v_front = LEAF.front;
     v_back = LEAF.back.rgb;
     gl_Position = frame.proj * frame.view * world;

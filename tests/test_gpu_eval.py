@@ -38,6 +38,28 @@ def test_readback_on_the_render_grid_and_normals(gl, presets):
         assert cos.min() > 1 - 1e-4, f"{name}: normal off by {np.degrees(np.arccos(cos.min())):.3f}°"
 
 
+@pytest.mark.parametrize("half", [-1, 1])
+def test_one_sided_leaf_spreads_the_grid_over_its_half(gl, presets, half):
+    """shape.half = ±1 (the sides of an asymmetric leaf): the shader evaluates the surface at
+    drawn_uv of the grid, the reference of leafview.model.leaf; positions, normals and the
+    tessellated mesh agree, and every vertex lies on the chosen half."""
+    from dataclasses import replace
+
+    from leafview.model.leaf import drawn_uv, tessellate
+
+    uv = grid_uv(33, 65)
+    for name in ("ovate", "asymmetric", "maize", "serrate"):
+        params = presets[name]
+        params = params.replace(shape=replace(params.shape, half=half))
+        drawn = drawn_uv(params, uv)
+        assert (half * drawn[:, 0] >= 0).all() and np.ptp(drawn[:, 0]) == 1.0
+        pos, nrm = gl.capture(params, uv[:, 0], uv[:, 1])
+        np.testing.assert_allclose(pos, leafview.evaluate(params, drawn[:, 0], drawn[:, 1]), atol=TOL, err_msg=name)
+        cos = np.sum(nrm * leafview.normals(params, drawn[:, 0], drawn[:, 1]), axis=1)
+        assert cos.min() > 1 - 1e-4, name
+        np.testing.assert_allclose(pos, tessellate(params, 33, 65).vertices, atol=TOL, err_msg=name)
+
+
 def test_jitter_changes_reach_the_shader(gl):
     base = leafview.LeafParams()
     u, v = np.ones(50), np.linspace(0.1, 0.9, 50)

@@ -56,7 +56,7 @@ def test_sequence_ends_are_the_shapes_and_fits_are_close():
     path = morph_path(src, tgt, [("oblong", 2.0)])
     np.testing.assert_allclose(seq.vectors[[0, -1]], path.vectors[[0, -1]], atol=1e-12)
     assert len(leaf_vector(src)) < path.space.dim    # the tail was inserted into the lanceolate leaf (eq. 10)
-    assert len(seq.params) == 5 and all(isinstance(p, LeafParams) for p in seq.params)
+    assert len(seq.parts) == 5 and all(len(p) == 1 and isinstance(p[0], LeafParams) for p in seq.parts)
     assert max(seq.errors) < 0.04          # linear fit only
     nurbs = smoothness(morph_path(src, tgt, [("oblong", 2.0)]).frame_vectors(5))
     assert seq.smoothness == nurbs
@@ -139,7 +139,7 @@ def test_controller_changes_only_the_shape_and_hits_the_ends(state):
     before = state.params
     c = MorphController(state, source="lanceolate", target="cordate")
     assert c.set_t(1.0)
-    assert state.params.shape == fit_frame(landmark_leaf("cordate"))[0].shape
+    assert state.params.shape == fit_frame(landmark_leaf("cordate")).parts[0].shape
     assert state.params.material == before.material and state.params.bending == before.bending
     assert c.last_error is not None and c.last_error <= 0.01
     c.end_drag()
@@ -171,3 +171,29 @@ def test_panel_t_slider_drag_is_one_undo_step(state):
         assert state.undo() and state.params == before and not state.can_undo
     finally:
         ui.close()
+
+
+def test_asymmetric_frames_are_two_one_sided_leaves_joined_at_the_midrib():
+    from leafview.model.asymmetric import LEFT_HALF, RIGHT_HALF
+    from leafview.model.leaf import evaluate
+
+    src = load_landmark_leaf(str(asset_dir() / "landmarks" / "asymmetric.toml"))
+    seq = morph_sequence(src, landmark_leaf("elliptic"), [], 3)
+    assert [len(p) for p in seq.parts] == [2, 2, 1]        # the symmetric target is one leaf
+    assert max(seq.errors) <= 0.01
+    right, left = seq.parts[0]
+    assert (right.shape.half, left.shape.half) == (RIGHT_HALF, LEFT_HALF)
+    v = np.linspace(0, 1, 11)
+    np.testing.assert_allclose(evaluate(right, 0 * v, v), evaluate(left, 0 * v, v), atol=1e-12)   # no crack
+
+
+@pytest.mark.gl
+def test_cli_asymmetric_source_writes_both_halves(gl, tmp_path, capsys):
+    out = tmp_path / "a"
+    src = str(asset_dir() / "landmarks" / "asymmetric.toml")
+    assert main(["morph", src, "ovate", "--frames", "3", "-o", str(out), "--size", "48", "--presets", "-q"]) == 0
+    names = sorted(p.name for p in out.glob("frame_0*"))
+    assert names == ["frame_0.left.toml", "frame_0.png", "frame_0.right.toml"]
+    halves = [LeafParams.load(out / f"frame_0.{side}.toml").shape.half for side in ("right", "left")]
+    assert halves == [-1, 1]
+    assert "2 asymmetric frame(s)" in capsys.readouterr().out

@@ -42,8 +42,8 @@ def _path(source: str, target: str, ref: str, weight: float) -> Any:
 def _fit(source: str, target: str, ref: str, weight: float, t: float, polish: bool) -> tuple[Shape, float]:
     from ..shapes.morph import fit_frame
 
-    params, err = fit_frame(_path(source, target, ref, weight).sample(t), polish=polish)
-    return params.shape, err
+    fit = fit_frame(_path(source, target, ref, weight).sample(t), polish=polish)
+    return fit.parts[0].shape, fit.error   # catalogue shapes and their morphs are symmetric: one leaf
 
 
 @dataclass

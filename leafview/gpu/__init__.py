@@ -52,5 +52,7 @@ def render(params: LeafParams, size: Any = (256, 256), view: str = "top",
 
 
 def evaluate(params: LeafParams, u: ArrayLike, v: ArrayLike) -> NDArray[np.float32]:
-    """Positions L_Ω(u, v) computed by the rendering vertex shader, (N, 3) float32."""
+    """Positions computed by the rendering vertex shader for grid parameters (u, v), (N, 3)
+    float32: L_Ω(u, v), or for a one-sided leaf (``shape.half = ±1``) L_Ω at
+    :func:`leafview.model.leaf.drawn_uv` of (u, v)."""
     return default_renderer().capture(params, u, v)[0]

@@ -85,7 +85,7 @@ LEAF_BLOCK = Block(
         ("zg", "vec4", 1),         # z̄g1..3
         ("jitter", "vec4", 1),     # amplitude (0 when off), density, table size, table row
         ("front", "vec4", 1),      # front rgb, translucency
-        ("back", "vec4", 1),       # back rgb, unused
+        ("back", "vec4", 1),       # back rgb, drawn half (shape.half: 0 both, ±1 one half)
         ("model", "mat4", 1),      # leaf space -> world
         ("deform", "vec4", 1),     # ripple on (0/1), bend on (0/1), secondary veins, signal row
         ("ripple_l", "vec4", 1),   # P, λ, k, θ of eq. 5 for the u >= 0 half (left in the top view)
@@ -171,7 +171,7 @@ def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: 
     amp = j.amplitude if j.enabled else 0.0
     rec["jitter"] = (amp, j.density, JITTER_TABLE_SIZE, 0.0)
     rec["front"] = (*m.front, m.translucency)
-    rec["back"] = (*m.back, 0.0)
+    rec["back"] = (*m.back, float(params.shape.half))
     rec["model"] = params.transform.matrix().T  # column-major for GLSL
     rip, bend = params.ripple, params.bending
     rec["deform"] = (float(rip.enabled), float(bend.active), rip.veins, float(ripple_row))

@@ -342,8 +342,21 @@ class Mesh:
     indices: NDArray[np.uint32]
 
 
+def drawn_uv(params: LeafParams, uv: ArrayLike) -> NDArray[np.float64]:
+    """The surface parameters the vertex shader evaluates for grid parameters ``uv`` (N, 2): the
+    grid itself, or with ``shape.half = ±1`` (one side of the midrib only) the grid's u ∈ [-1, 1]
+    spread over that half, ``u' = (u + half) / 2`` (increasing with u, so triangles keep their
+    winding and the upper side stays the front face)."""
+    out = np.array(uv, dtype=np.float64, copy=True).reshape(-1, 2)
+    half = params.shape.half
+    if half:
+        out[:, 0] = 0.5 * (out[:, 0] + half)
+    return out
+
+
 def tessellate(params: LeafParams, nu: int = 33, nv: int = 65) -> Mesh:
-    """Bake the leaf on the (nu × nv) grid of :func:`grid_uv` (leaf space, no world transform)."""
-    uv = grid_uv(nu, nv).astype(np.float64)
+    """Bake the leaf on the (nu × nv) grid of :func:`grid_uv` (leaf space, no world transform),
+    as drawn (:func:`drawn_uv`)."""
+    uv = drawn_uv(params, grid_uv(nu, nv))
     p = partials(params, uv[:, 0], uv[:, 1])
     return Mesh(p.L, _normal_from(p, uv[:, 1]), uv, grid_indices(nu, nv))

@@ -104,6 +104,8 @@ class Shape:
                                   default=(0.0, 0.0, 0.0))
     tilt: tuple[float, ...] = _spec("row tilt φ (degrees, + towards the base)", "silhouette", -90.0, 90.0, 0.5,
                                     hard=(-90.0, 90.0), kind="per_row", default=(0.0, 0.0, 0.0))
+    half: int = _spec("drawn half (0 both, +1 u ≥ 0, -1 u < 0)", "silhouette", -1, 1, 1, hard=(-1, 1),
+                      kind="int", default=0)
 
     def __post_init__(self) -> None:
         # an untilted shape built with more rows than the default tilt gets one zero per row
@@ -416,7 +418,7 @@ def _parse_group(cls: type, data: Any, group: str, *, required: bool) -> Any:
     for name, f in known.items():  # silhouette comes before the per-row fields
         path = f"{group}.{name}"
         if name not in data:
-            if required and not (cls is Shape and name == "tilt"):  # tilt is optional (schema 1 files)
+            if required and not (cls is Shape and name in _OPTIONAL_SHAPE):  # optional in schema 1 files
                 raise ParamError(path, "missing field")
             continue
         values[name] = _parse_field(data[name], f.metadata["spec"], path, rows)
@@ -428,6 +430,9 @@ def _parse_group(cls: type, data: Any, group: str, *, required: bool) -> Any:
     if cls is Bending and not any(obj.direction):
         raise ParamError(f"{group}.direction", "the load direction must not be the zero vector")
     return obj
+
+
+_OPTIONAL_SHAPE = ("tilt", "half")   # added to schema 1 later; files without them stay valid
 
 
 def _check_shape(shape: Shape) -> None:

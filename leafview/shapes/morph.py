@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from ..model.asymmetric import ShaderLeaves, shader_leaves
 from ..model.landmarks import LandmarkLeaf
 from ..model.morph import keyframe_path, morph_path, smoothness
 from ..model.params import LeafParams, ParamError
@@ -72,24 +73,28 @@ def load_morph_leaf(spec: str, what: str) -> LandmarkLeaf:
         raise ParamError(what, str(exc)) from None
 
 
-def fit_frame(leaf: LandmarkLeaf, name: str = "", *, polish: bool = True) -> tuple[LeafParams, float]:
-    """Ω for one landmark frame and its outline error (Hausdorff ÷ leaf length)."""
-    from . import INSTANCE_TARGET, fit_landmark_leaf
+def fit_frame(leaf: LandmarkLeaf, name: str = "", *, polish: bool = True) -> ShaderLeaves:
+    """The shader-model leaves of one landmark frame (one leaf, or one per side when the frame is
+    asymmetric: :mod:`leafview.model.asymmetric`) and their outline error (Hausdorff ÷ leaf
+    length)."""
+    from . import INSTANCE_TARGET
 
-    fit = fit_landmark_leaf(leaf, polish=polish, target=INSTANCE_TARGET)
-    return fit.params.replace(name=name or leaf.name), float(fit.error)
+    return shader_leaves(leaf, target=INSTANCE_TARGET, polish=polish, name=name or leaf.name)
 
 
 @dataclass
 class MorphSequence:
-    """The frames of a morph: landmark leaves, their fitted Ω and where they sit on the path."""
+    """The frames of a morph: landmark leaves, their fitted Ω and where they sit on the path.
+
+    ``parts[i]`` holds frame i's shader-model leaves: one, or (right half, left half) when the
+    frame is asymmetric."""
 
     method: str
     t: NDArray[np.float64]                 # frame positions in [0, 1] (arc length or parameter)
     by: str
     leaves: list[LandmarkLeaf]
     vectors: NDArray[np.float64]           # (frames, dim) in the unified leaf space
-    params: list[LeafParams] = field(default_factory=list)
+    parts: list[tuple[LeafParams, ...]] = field(default_factory=list)
     errors: list[float] = field(default_factory=list)
     smoothness: dict[str, float] = field(default_factory=dict)
     keyframe_smoothness: dict[str, float] = field(default_factory=dict)
@@ -103,8 +108,9 @@ class MorphSequence:
             "leaf_space": self.space_names,
             "smoothness": self.smoothness, "keyframe_smoothness": self.keyframe_smoothness,
             "reference_distances": self.reference_distances,
-            "frame": [{"t": float(t), "vector": [float(x) for x in v], "fit_error": e, "name": p.name}
-                      for t, v, e, p in zip(self.t, self.vectors, self.errors, self.params)],
+            "frame": [{"t": float(t), "vector": [float(x) for x in v], "fit_error": e,
+                       "leaves": [p.name for p in parts]}
+                      for t, v, e, parts in zip(self.t, self.vectors, self.errors, self.parts)],
         }
 
 
@@ -145,9 +151,9 @@ def morph_sequence(source: LandmarkLeaf, target: LandmarkLeaf,
                         reference_distances=[path.distance_to(v) for v in path.vectors[1:-1]])
     width = len(str(frames - 1))
     for i, leaf in enumerate(leaves):
-        params, err = fit_frame(leaf, f"morph {i:0{width}d} t={t[i]:.3f}", polish=polish)
-        seq.params.append(params)
-        seq.errors.append(err)
+        fit = fit_frame(leaf, f"morph {i:0{width}d} t={t[i]:.3f}", polish=polish)
+        seq.parts.append(fit.parts)
+        seq.errors.append(fit.error)
         if progress is not None:
             progress(1)
     return seq
@@ -167,18 +173,31 @@ def shared_camera(leaves: Sequence[LeafParams], view: str, size: tuple[int, int]
     return frame_view(view, np.concatenate(points), size)
 
 
-def render_sequence(params: Sequence[LeafParams], size: int, view: str = "top", *,
+def render_sequence(frames: Sequence[Sequence[LeafParams]], size: int, view: str = "top", *,
                     progress: Callable[[int], None] | None = None) -> list[NDArray[np.uint8]]:
-    """Render frames with one shared camera (:func:`shared_camera`), 16 at a time."""
+    """Render frames (each one or more shader-model leaves) with one shared camera
+    (:func:`shared_camera`): single-leaf frames 16 at a time, frames of several leaves (the halves
+    of an asymmetric leaf) in one instanced draw each."""
     from ..gpu import default_renderer
     from .cli import SHAPES_GRID
+    from .render import render_leaves
 
     renderer = default_renderer()
-    camera = shared_camera(params, view, (size, size), SHAPES_GRID)
+    camera = shared_camera([p for parts in frames for p in parts], view, (size, size), SHAPES_GRID)
     images: list[NDArray[np.uint8]] = []
-    for start in range(0, len(params), 16):
-        batch = list(params[start:start + 16])
-        images += renderer.render_many(batch, (size, size), view, grid=SHAPES_GRID, camera=camera)
+    start = 0
+    while start < len(frames):
+        if len(frames[start]) != 1:
+            images.append(render_leaves(list(frames[start]), (size, size), view, grid=SHAPES_GRID,
+                                        renderer=renderer, camera=camera))
+            step = 1
+        else:
+            batch = []
+            while start + len(batch) < len(frames) and len(batch) < 16 and len(frames[start + len(batch)]) == 1:
+                batch.append(frames[start + len(batch)][0])
+            images += renderer.render_many(batch, (size, size), view, grid=SHAPES_GRID, camera=camera)
+            step = len(batch)
+        start += step
         if progress is not None:
-            progress(len(batch))
+            progress(step)
     return images

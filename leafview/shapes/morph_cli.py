@@ -8,7 +8,8 @@ Examples::
 
 Writes ``DIR/frame_000.png`` … (one shared camera), ``DIR/sheet.png`` (labelled contact sheet),
 ``DIR/morph.json`` (each frame's leaf-space vector and fit error, the path's smoothness beside
-linear key-framing through the same references) and, with ``--presets``, each frame's Ω preset.
+linear key-framing through the same references) and, with ``--presets``, each frame's Ω preset
+(an asymmetric frame is two one-sided leaves: ``frame_NNN.right.toml`` and ``.left.toml``).
 """
 
 from __future__ import annotations
@@ -64,20 +65,16 @@ def _output_dir(text: str) -> Path:
 
 
 def _warn_loose_fits(seq) -> None:
-    """Say which frames the shader model follows less closely than 1 % of the leaf length, and why
-    when the reason is known (the model is mirror-symmetric: asymmetric frames get the mean side)."""
+    """Say which frames the shader model follows less closely than 1 % of the leaf length."""
     from . import INSTANCE_TARGET
 
     loose = [i for i, e in enumerate(seq.errors) if e > INSTANCE_TARGET]
     if not loose:
         return
-    asym = [i for i in loose if not seq.leaves[i].is_symmetric]
     worst = max(seq.errors[i] for i in loose)
-    why = (f"; {len(asym)} of them asymmetric: the shader model is mirror-symmetric and draws the mean of "
-           "the two sides") if asym else ""
     print(f"note: {len(loose)} frame(s) ({', '.join(map(str, loose[:8]))}{' ...' if len(loose) > 8 else ''}) "
           f"fit the shader model to {100 * worst:.2f} % of the leaf length, above the {100 * INSTANCE_TARGET:g} % "
-          f"goal{why}", file=sys.stderr)
+          f"goal (--fast fits are looser)", file=sys.stderr)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -105,17 +102,24 @@ def run(args: argparse.Namespace) -> int:
                              progress=bar.update)
     t_fit = time.perf_counter() - t0
     with tqdm(total=args.frames, unit="frame", desc="rendering", disable=quiet, file=sys.stderr) as bar:
-        images = render_sequence(seq.params, args.size, args.view, progress=bar.update)
+        images = render_sequence(seq.parts, args.size, args.view, progress=bar.update)
     width = len(str(args.frames - 1))
     labels = [f"{i:0{width}d}  t={t:.2f}" for i, t in enumerate(seq.t)]
     sheet = contact_sheet(images, labels, columns=min(8, args.frames))
 
     out.mkdir(parents=True, exist_ok=True)
-    for i, (img, params) in enumerate(zip(images, seq.params)):
-        write_image(out / f"frame_{i:0{width}d}.png", img, params=params)
+    for i, (img, parts) in enumerate(zip(images, seq.parts)):
+        stem = f"frame_{i:0{width}d}"
+        if len(parts) == 1:
+            write_image(out / f"{stem}.png", img, params=parts[0])
+        else:
+            write_image(out / f"{stem}.png", img, description=f"leafview morph frame {i}: asymmetric, "
+                        f"drawn as two one-sided leaves ({stem}.right.toml, {stem}.left.toml with --presets)")
         if args.presets:
-            with atomic_output(out / f"frame_{i:0{width}d}.toml") as tmp:
-                Path(tmp).write_text(dumps_toml(params), encoding="utf-8")
+            names = [f"{stem}.toml"] if len(parts) == 1 else [f"{stem}.right.toml", f"{stem}.left.toml"]
+            for fname, params in zip(names, parts):
+                with atomic_output(out / fname) as tmp:
+                    Path(tmp).write_text(dumps_toml(params), encoding="utf-8")
     write_image(out / "sheet.png", sheet,
                 description=f"leafview morph {args.source} -> {args.target} ({args.method}, {args.frames} frames)")
     summary = seq.summary() | {"source": args.source, "target": args.target,
@@ -126,7 +130,9 @@ def run(args: argparse.Namespace) -> int:
     s, k = seq.smoothness, seq.keyframe_smoothness
     print(f"wrote {args.frames} frames ({args.size}×{args.size}, {args.view} view), sheet.png and morph.json "
           f"to {out}/ in {time.perf_counter() - t0:.1f} s (fits {t_fit:.1f} s)")
-    print(f"leaf space: {len(seq.space_names)} dimensions; frame fit error: largest "
+    asym = sum(len(p) > 1 for p in seq.parts)
+    halves = f"; {asym} asymmetric frame(s) drawn as two one-sided leaves" if asym else ""
+    print(f"leaf space: {len(seq.space_names)} dimensions{halves}; frame fit error: largest "
           f"{100 * max(seq.errors):.2f} %, median {100 * sorted(seq.errors)[len(seq.errors) // 2]:.2f} % "
           f"of the leaf length")
     print(f"{'smoothness over ' + str(args.frames) + ' frames':34s} {'max step':>9s} {'step max/mean':>14s} "

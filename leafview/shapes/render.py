@@ -20,10 +20,11 @@ LOBE_GRID = (33, 129)
 
 def render_leaves(leaves: Sequence[LeafParams], size: tuple[int, int] = (256, 256), view: str = "top",
                   *, grid: tuple[int, int] = LOBE_GRID, samples: int | None = None,
-                  flat: bool = False, renderer: Any = None) -> NDArray[np.uint8]:
+                  flat: bool = False, renderer: Any = None, camera: Any = None) -> NDArray[np.uint8]:
     """Draw ``leaves`` (world placement from each one's transform) into one (h, w, 4) uint8 sRGB
     image with a transparent background, framed like :meth:`LeafRenderer.render` (top view: no
-    multisampling; other views 4×). ``flat``: unlit colours (tests)."""
+    multisampling; other views 4×), or by ``camera`` (:func:`leafview.camera.frame_view`) when
+    given. ``flat``: unlit colours (tests)."""
     import moderngl
 
     from ..camera import frame_view
@@ -43,7 +44,9 @@ def render_leaves(leaves: Sequence[LeafParams], size: tuple[int, int] = (256, 25
             OffscreenTarget(ctx, (w, h), samples) as target, OffscreenTarget(ctx, (w, h)) as resolved:
         target.use()
         pos, _ = inst.capture()
-        inst.set_camera(frame_view(view, pos.reshape(-1, 3).astype(np.float64), (w, h)), flat=flat)
+        if camera is None:
+            camera = frame_view(view, pos.reshape(-1, 3).astype(np.float64), (w, h))
+        inst.set_camera(camera, flat=flat)
         target.use()
         target.clear()
         inst.draw()
