@@ -16,7 +16,14 @@ is asserted:
   (``generated_polished_per_s`` the same with the polished fit);
 * ``extended_vs_quartic_frame``: frame time of leaves on the extended silhouette path ÷ the same
   count of the paper's quartic leaves (the cost of the extension);
-* bytes of the leaf record.
+* bytes of the leaf record;
+* ``landmark_leaves_per_s`` (issue 6 §7): random instances of all 62 catalogue shapes generated
+  (:func:`~leafview.model.shapes.random_instance` and its margin), fitted to within 1 % in one
+  batch (:func:`~leafview.model.batch_fit.fit_outlines`) and rendered as thumbnails
+  (:meth:`~leafview.gpu.renderer.LeafRenderer.render_many`, 128², grid 32 × 64, read back), per
+  second, against ``landmark_leaves_per_s_per_leaf``: the same leaves (a subset) through the old
+  path, one :func:`~leafview.model.outline_fit.fit_outline` each (least-squares polish); both
+  divided by the paper's 550 /s.
 """
 
 from __future__ import annotations
@@ -84,6 +91,87 @@ def _frame_time(ctx: Any, leaves: list[Any], repeats: int) -> tuple[float, float
             return _median_time(frame, repeats, ctx.finish), upload
 
 
+def _landmark_rates(ctx: Any, res: dict[str, Any], quick: bool) -> None:
+    """Issue 6 §7: landmark leaves generated, fitted and rendered per second, batched path and
+    per-leaf path side by side (same leaves, same renderer, same thumbnail size)."""
+    from ..benchmarks import PAPER_LEAVES_PER_S, THUMB_GRID, THUMB_SIZE
+    from ..gpu.renderer import LeafRenderer
+    from ..model.batch_fit import fit_outlines
+    from ..model.landmarks import outline
+    from ..model.outline_fit import fit_outline
+    from ..model.shapes import catalogue_names, landmark_leaf, random_instance
+    from . import INSTANCE_TARGET
+
+    names = catalogue_names()
+    count, repeats, n_old = (62, 1, 2) if quick else (248, 3, 8)
+    bases = [landmark_leaf(names[i % len(names)]) for i in range(count)]
+
+    def generate(k: int) -> tuple[list[Any], np.ndarray]:
+        leaves = [random_instance(bases[i], seed=i, amount=0.2) for i in range(k)]
+        return leaves, np.stack([outline(leaf, 128) for leaf in leaves])
+
+    renderer = LeafRenderer(ctx)
+    try:
+        renderer.render_many(_warm_leaves(), THUMB_SIZE, "top", grid=THUMB_GRID)  # compile the shader variants
+        ctx.finish()
+        stages: dict[str, list[float]] = {"generate": [], "fit": [], "render": []}
+        fit = None
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            leaves, rings = generate(count)
+            t1 = time.perf_counter()
+            fit = fit_outlines(rings, target=INSTANCE_TARGET, names=[leaf.name for leaf in leaves])
+            t2 = time.perf_counter()
+            renderer.render_many(fit.params, THUMB_SIZE, "top", grid=THUMB_GRID)
+            ctx.finish()
+            t3 = time.perf_counter()
+            for key, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2)):
+                stages[key].append(dt / count)
+        assert fit is not None
+        per = {k: statistics.median(v) for k, v in stages.items()}
+        res["landmark_count"] = count
+        res["landmark_thumbnail"] = list(THUMB_SIZE)
+        res["landmark_generate_ms"] = 1e3 * per["generate"]
+        res["landmark_fit_batched_ms"] = 1e3 * per["fit"]
+        res["landmark_render_ms"] = 1e3 * per["render"]
+        res["landmark_leaves_per_s"] = 1.0 / sum(per.values())
+        summary = fit.summary()
+        res["landmark_fit_error_median"] = summary["error_median"]
+        res["landmark_fit_error_p95"] = summary["error_p95"]
+        res["landmark_fit_error_max"] = summary["error_max"]
+        res["landmark_fit_rows"] = {str(k): v for k, v in summary["rows"].items()}
+        res["landmark_fit_fallback"] = summary["fallback"]
+        res["landmark_fit_missed"] = summary["missed"]
+
+        # the old path on a subset of the same leaves: one polished fit and one render per leaf
+        step = count // n_old
+        t0 = time.perf_counter()
+        leaves = [random_instance(bases[i], seed=i, amount=0.2) for i in range(0, count, step)][:n_old]
+        rings = [outline(leaf, 128) for leaf in leaves]
+        t1 = time.perf_counter()
+        old = [fit_outline(ring, target=INSTANCE_TARGET).params for ring in rings]
+        t2 = time.perf_counter()
+        for params in old:
+            renderer.render(params, THUMB_SIZE, "top", grid=THUMB_GRID)
+        ctx.finish()
+        t3 = time.perf_counter()
+        res["landmark_per_leaf_count"] = n_old
+        res["landmark_fit_per_leaf_ms"] = 1e3 * (t2 - t1) / n_old
+        res["landmark_leaves_per_s_per_leaf"] = n_old / (t3 - t0)
+        res["landmark_batched_vs_per_leaf"] = res["landmark_leaves_per_s"] / res["landmark_leaves_per_s_per_leaf"]
+        res["landmark_fit_speedup"] = res["landmark_fit_per_leaf_ms"] / res["landmark_fit_batched_ms"]
+        res["landmark_vs_paper_550"] = res["landmark_leaves_per_s"] / PAPER_LEAVES_PER_S
+        res["landmark_per_leaf_vs_paper_550"] = res["landmark_leaves_per_s_per_leaf"] / PAPER_LEAVES_PER_S
+    finally:
+        renderer.release()
+
+
+def _warm_leaves() -> list[Any]:
+    from . import shapes_params
+
+    return [shapes_params("ovate"), shapes_params("cordate")]
+
+
 def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
     from ..benchmarks import PAPER_LEAVES_PER_S
     from ..gpu.context import check_error, create_headless_context
@@ -139,6 +227,7 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
         res["extended_vs_quartic_frame"] = te / tq
         res["record_bytes"] = LEAF_BLOCK.nbytes
         res["param_bytes"] = LEAF_BLOCK.parameter_nbytes
+        _landmark_rates(ctx, res, quick)
         check_error(ctx, "shapes benchmark")
     finally:
         if own:
@@ -165,6 +254,23 @@ def format_table(res: dict[str, Any]) -> str:
          f"({res['extended_frame_ms']:.1f} / {res['quartic_frame_ms']:.1f} ms)"),
         ("leaf record: parameters / whole", f"{res['param_bytes']} B / {res['record_bytes']} B"),
     ]
+    if "landmark_leaves_per_s" in res:
+        size = "×".join(str(s) for s in res["landmark_thumbnail"])
+        rows += [
+            (f"landmark leaves, batched ({res['landmark_count']} of all 62 shapes, {size} thumbnails)",
+             f"{res['landmark_leaves_per_s']:,.1f} /s  (generate {res['landmark_generate_ms']:.2f} + fit "
+             f"{res['landmark_fit_batched_ms']:.2f} + render {res['landmark_render_ms']:.2f} ms/leaf)"),
+            ("  batched fit error (median / p95 / max)", f"{pct(res['landmark_fit_error_median'])} / "
+             f"{pct(res['landmark_fit_error_p95'])} / {pct(res['landmark_fit_error_max'])}  (fallbacks "
+             f"{res['landmark_fit_fallback']}, above 1 %: {res['landmark_fit_missed']})"),
+            ("  rows per leaf", ", ".join(f"{k}: {v}" for k, v in res["landmark_fit_rows"].items())),
+            (f"landmark leaves, per-leaf polished fit ({res['landmark_per_leaf_count']} of them)",
+             f"{res['landmark_leaves_per_s_per_leaf']:,.2f} /s  (fit {res['landmark_fit_per_leaf_ms']:.0f} ms/leaf)"),
+            ("  batched ÷ per-leaf (end to end / fit only)", f"{res['landmark_batched_vs_per_leaf']:.1f}× / "
+             f"{res['landmark_fit_speedup']:.1f}×"),
+            ("  vs the paper's ~550 /s (batched / per-leaf)", f"{res['landmark_vs_paper_550']:.3g}× / "
+             f"{res['landmark_per_leaf_vs_paper_550']:.3g}×"),
+        ]
     width = max(len(r[0]) for r in rows)
     head = f"leafview shapes benchmark{' (quick)' if res['quick'] else ''}: {res['gl_renderer']}"
     return "\n".join([head] + [f"  {a:<{width}}  {b}" for a, b in rows])
