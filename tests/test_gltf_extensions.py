@@ -10,12 +10,12 @@ import json
 import math
 import struct
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 from test_export import gltf_validate
+from test_export_scene import StandInScene
 
 from leafview.export import export_leaf, export_scene
 from leafview.export.extensions import (
@@ -33,20 +33,7 @@ INST = "EXT_mesh_gpu_instancing"
 DIFF = "KHR_materials_diffuse_transmission"
 
 
-@dataclass
-class SmallScene:
-    """The scene interface of leafview.model.scene.Scene (SceneLike), filled by hand."""
-
-    species: list[LeafParams]
-    shape_ids: np.ndarray
-    matrices: np.ndarray
-    stems: tuple | None = None
-
-    def shapes(self) -> list[LeafParams]:
-        return list(self.species)
-
-    def __len__(self) -> int:
-        return len(self.shape_ids)
+SmallScene = StandInScene      # the duck-typed scene interface, filled by hand
 
 
 @pytest.fixture(scope="module")

@@ -21,13 +21,9 @@ def window_size(text: str) -> tuple[int, int]:
 
 
 def _frames(text: str) -> int:
-    try:
-        n = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of frames, got {text!r}") from None
-    if n < 1:
-        raise argparse.ArgumentTypeError(f"--frames must be at least 1, got {n}")
-    return n
+    from ..cli import int_in_range
+
+    return int_in_range(text, lo=1, hi=None, what="frames", name="--frames")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -61,6 +61,7 @@ from .outline_fit import (
     _params_from_controls,
     fit_outline,
 )
+from .outline_fit import _project as _project_feet  # one foot-point Newton for one curve or a batch
 from .params import MAX_SILHOUETTE_ROWS, LeafParams, ParamError
 
 __all__ = ["BatchFit", "fit_outlines", "fit_landmark_leaves", "fit_sides", "minimax_sides", "elevate",
@@ -210,21 +211,7 @@ def _with_ends(inner: NDArray[np.float64]) -> NDArray[np.float64]:
 def _project(ctrl: NDArray[np.float64], pts: NDArray[np.float64], t: NDArray[np.float64],
              steps: int | None = None) -> NDArray[np.float64]:
     """Newton steps moving each sample's parameter to its foot on its leaf's curve (batched)."""
-    steps = _PROJECT_STEPS if steps is None else steps
-    n = ctrl.shape[1] - 1
-    d1 = derivative_points(ctrl)
-    d2 = derivative_points(d1)
-    for _ in range(steps):
-        r = bernstein(n, t) @ ctrl - pts
-        s1 = bernstein(n - 1, t) @ d1
-        s2 = bernstein(n - 2, t) @ d2
-        num = np.sum(r * s1, axis=2)
-        den = np.sum(s1 * s1, axis=2) + np.sum(r * s2, axis=2)
-        step = num / np.where(np.abs(den) > 1e-12, den, 1e-12)
-        t = np.clip(t - np.clip(step, -0.05, 0.05), 0.0, 1.0)
-        t[:, 0], t[:, -1] = 0.0, 1.0
-        t = np.maximum.accumulate(t, axis=1)
-    return t
+    return _project_feet(ctrl, pts, t, _PROJECT_STEPS if steps is None else steps)
 
 
 def _linear_solve(pts: NDArray[np.float64], t: NDArray[np.float64], n: int) -> NDArray[np.float64]:

@@ -182,20 +182,22 @@ def _controls(inner: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def _project(ctrl: NDArray[np.float64], pts: NDArray[np.float64], t: NDArray[np.float64],
              steps: int = 3) -> NDArray[np.float64]:
-    """Newton steps moving each parameter to the foot of its sample on the curve."""
-    n = len(ctrl) - 1
+    """Newton steps moving each parameter to the foot of its sample on the curve, the first and
+    last parameters pinned to 0 and 1 and the order kept. Works on one curve (``ctrl`` (n+1, 2),
+    ``pts`` (P, 2), ``t`` (P,)) or a batch (leading axis B on all three)."""
+    n = ctrl.shape[-2] - 1
     d1 = derivative_points(ctrl)
     d2 = derivative_points(d1)
     for _ in range(steps):
         r = bernstein(n, t) @ ctrl - pts
         s1 = bernstein(n - 1, t) @ d1
         s2 = bernstein(n - 2, t) @ d2
-        num = np.sum(r * s1, axis=1)
-        den = np.sum(s1 * s1, axis=1) + np.sum(r * s2, axis=1)
+        num = np.sum(r * s1, axis=-1)
+        den = np.sum(s1 * s1, axis=-1) + np.sum(r * s2, axis=-1)
         step = num / np.where(np.abs(den) > 1e-12, den, 1e-12)
         t = np.clip(t - np.clip(step, -0.05, 0.05), 0.0, 1.0)
-        t[0], t[-1] = 0.0, 1.0
-        t = np.maximum.accumulate(t)
+        t[..., 0], t[..., -1] = 0.0, 1.0
+        t = np.maximum.accumulate(t, axis=-1)
     return t
 
 
