@@ -31,14 +31,21 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
-def _size(text: str) -> int:
+def int_in_range(text: str, *, lo: int, hi: int | None, what: str, name: str) -> int:
+    """Parse a whole number in lo..hi (no upper bound when ``hi`` is None) for argparse:
+    ``what`` names the unit in the type error, ``name`` the option in the range error."""
     try:
         n = int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of pixels, got {text!r}") from None
-    if not 8 <= n <= 8192:
-        raise argparse.ArgumentTypeError(f"size must be between 8 and 8192 pixels, got {n}")
+        raise argparse.ArgumentTypeError(f"expected a whole number of {what}, got {text!r}") from None
+    if n < lo or (hi is not None and n > hi):
+        bound = f"between {lo} and {hi}" if hi is not None else f"at least {lo}"
+        raise argparse.ArgumentTypeError(f"{name} must be {bound} {what}, got {n}")
     return n
+
+
+def _size(text: str) -> int:
+    return int_in_range(text, lo=8, hi=8192, what="pixels", name="size")
 
 
 def int_pair(text: str, *, lo: int, hi: int, what: str, example: str) -> tuple[int, int]:
@@ -153,6 +160,14 @@ def _expand(specs: Sequence[str]) -> list[Path]:
     return paths
 
 
+def load_leaf_files(paths: Sequence[Path]) -> list[LeafParams]:
+    """Every leaf of the given files, in order: a leaf set (``*.leaves.json``) gives all of its
+    leaves, any other preset file one. Each leaf is named (its file's stem when unnamed)."""
+    from .model.io import load_leaves
+
+    return [leaf for path in paths for leaf in load_leaves(path)]
+
+
 def _plan(args: argparse.Namespace, count: int) -> tuple[str, Path, str]:
     """(mode, output path, format) with mode 'file', 'dir' or 'sheet'; raises UsageError."""
     from .imaging import format_of
@@ -182,10 +197,9 @@ def _plan(args: argparse.Namespace, count: int) -> tuple[str, Path, str]:
 def _render(args: argparse.Namespace) -> int:
     from .imaging import FORMATS, contact_sheet, write_image
 
-    paths = _expand(args.presets)
-    mode, out, fmt = _plan(args, len(paths))
-    leaves = [LeafParams.load(p) for p in paths]  # validate everything before writing anything
-    names = [p.name or path.stem for p, path in zip(leaves, paths)]
+    leaves = load_leaf_files(_expand(args.presets))  # validate everything before writing anything
+    mode, out, fmt = _plan(args, len(leaves))
+    names = [leaf.name for leaf in leaves]
     if mode == "dir" and len(set(names)) != len(names):
         dup = sorted({n for n in names if names.count(n) > 1})
         raise UsageError(f"several presets are named {', '.join(dup)}: their images would overwrite each other")

@@ -55,7 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      "each leaf varied), then render it offscreen with GPU culling and level of detail, "
                      "save it as a scene file, export it, or open it in a window.")
     p.add_argument("scene", nargs="?", metavar="SCENE", help="a scene file (.toml/.json) to load; "
-                   "options given on the command line override its settings")
+                   "options given on the command line override its settings. A leaf set "
+                   "(.leaves.json) is drawn as its explicit leaves")
     p.add_argument("--leaves", type=_count, help="number of leaves (default 10000, or the file's)")
     p.add_argument("--species", help="comma-separated presets (names or files), e.g. ovate,lanceolate")
     p.add_argument("--layout", choices=LAYOUTS, help="one plant, a field of plants or a hedge (default field)")
@@ -68,7 +69,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--camera", choices=SCENE_VIEWS, default="three-quarter", help="camera (default three-quarter)")
     p.add_argument("--no-cull", action="store_true", help="draw every leaf (no frustum or size culling)")
     p.add_argument("--no-lod", action="store_true", help="every leaf at the finest grid")
-    p.add_argument("--save", metavar="FILE", help="write the scene file (.toml or .json)")
+    p.add_argument("--save", metavar="FILE", help="write the scene file (.toml or .json), or every placed "
+                   "leaf as a leaf set (.leaves.json)")
     p.add_argument("--export", metavar="FILE", help="bake the scene to a mesh file (.glb, .gltf, .usda, .usdc)")
     p.add_argument("--view", action="store_true", help="open the scene in a window (orbit, culling/LOD panel)")
     p.add_argument("--frames", type=int, metavar="N", help="with --view: draw N frames, then close (scripted runs)")
@@ -123,19 +125,57 @@ def _check_outputs(args: argparse.Namespace) -> None:
             raise UsageError(f"{flag} {value} is a directory; give a file name")
 
 
+def _leaf_set(args: argparse.Namespace) -> list[Any] | None:
+    """The leaves of ``SCENE`` when it is a leaf set (``{"leafview": 1, "leaves": [...]}``), else None."""
+    if not args.scene or Path(args.scene).suffix.lower() != ".json":
+        return None
+    from .model.compact import is_compact
+    from .model.io import load_leaves, read_document
+
+    doc = read_document(args.scene)
+    if not is_compact(doc):
+        return None
+    overrides = [f"--{k.replace('_', '-')}" for k in ("leaves", "species", "layout", "seed", "plants", "variation")
+                 if getattr(args, k) is not None] + (["--no-stems"] if args.no_stems else [])
+    if overrides:
+        raise UsageError(f"{args.scene} is a leaf set of explicit leaves: {', '.join(overrides)} "
+                         "apply to scene recipes only")
+    return load_leaves(args.scene)
+
+
+def _save(scene: Any, spec: SceneSpec, path: str, explicit: bool) -> None:
+    """--save: a recipe as .toml/.json, or every placed leaf as a leaf set (.leaves.json)."""
+    from .model.io import save_leaves
+    from .model.scene import save_scene
+
+    if path.lower().endswith(".leaves.json"):
+        save_leaves([scene.placed_leaf(i) for i in range(len(scene))], path)
+    elif explicit:
+        raise UsageError(f"--save {path}: a leaf set has no recipe; save it as NAME.leaves.json")
+    else:
+        save_scene(spec, path)
+
+
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from .model.scene import build_scene, save_scene
+    from .model.scene import build_scene
 
     _check_outputs(args)
-    spec = spec_from_args(args)       # every input is validated before anything is written
     say = (lambda text: None) if args.quiet else print
     t0 = time.perf_counter()
-    scene = build_scene(spec)
+    leaves = _leaf_set(args)
+    if leaves is not None:            # a leaf set: explicit placed leaves, drawn as they are
+        from .model.scene import scene_from_leaves
+
+        scene = scene_from_leaves(leaves, name=Path(args.scene).name)
+        spec = scene.spec
+    else:
+        spec = spec_from_args(args)   # every input is validated before anything is written
+        scene = build_scene(spec)
     t_build = time.perf_counter() - t0
     if args.save:
-        save_scene(spec, args.save)
+        _save(scene, spec, args.save, leaves is not None)
         say(f"wrote {args.save}: {len(scene):,} leaves, {len(spec.species)} species, seed {spec.seed}")
     if args.export:
         from .export import export_scene

@@ -33,30 +33,13 @@ from ..resources import builtin_presets
 from . import write
 from .scene import ExportScene, leaf_scene, scene_from
 
-__all__ = ["compact_leaf_json", "format_table", "run"]
+__all__ = ["format_table", "run"]
 
 SCENE_GRID = (9, 15)           # 224 triangles per leaf, as the core benchmark's scene
 _CONFIG: dict[bool, dict[str, Any]] = {
     False: {"leaves": 10_000, "repeats": 3, "numpy_leaves": 200, "obj": True},
     True: {"leaves": 400, "repeats": 1, "numpy_leaves": 40, "obj": False},
 }
-
-
-def compact_leaf_json(params: LeafParams) -> str:
-    """Minified JSON of ``params`` without the fields that equal their defaults (``shape`` is
-    kept whole: it is required); loading it gives ``params`` back."""
-    full = params.to_dict()
-    default = LeafParams().to_dict()
-    out: dict[str, Any] = {"schema": full["schema"]}
-    if "name" in full:
-        out["name"] = full["name"]
-    for group, table in full.items():
-        if not isinstance(table, dict):
-            continue
-        kept = {k: v for k, v in table.items() if group == "shape" or v != default[group][k]}
-        if kept:
-            out[group] = kept
-    return json.dumps(out, separators=(",", ":"))
 
 
 class _StandIn:
@@ -167,12 +150,21 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
         res["single_leaf_glb_bytes_33x65"] = single.stat().st_size
         res["preset_toml_bytes"] = builtin_presets()["beech"].stat().st_size
 
+    from ..model import compact
+
     leaves = distinct.shapes()[:200]
     res["leaf_json_bytes"] = float(np.mean([len(json.dumps(p.to_dict(), separators=(",", ":"))) for p in leaves]))
-    res["leaf_compact_json_bytes"] = float(np.mean([len(compact_leaf_json(p)) for p in leaves]))
+    placed = [distinct.placed_leaf(i) if hasattr(distinct, "placed_leaf") else leaf for i, leaf in
+              enumerate(distinct.shapes())]
+    res["leaf_set_bytes_per_leaf"] = len(compact.dumps_leaves(placed)) / len(placed)
+    res["leaf_set6_bytes_per_leaf"] = len(compact.dumps_leaves(placed, digits=6)) / len(placed)
+    preset_sizes = [len(compact.dumps(LeafParams.load(p))) for p in builtin_presets().values()]
+    res["preset_compact_bytes_median"] = float(np.median(preset_sizes))
+    res["preset_compact_bytes_range"] = [min(preset_sizes), max(preset_sizes)]
     res["scene_file_bytes"] = scene_file
     res["glb_vs_leaf_json"] = res["distinct_glb_bytes_per_leaf"] / res["leaf_json_bytes"]
-    res["glb_vs_compact_json"] = res["distinct_glb_bytes_per_leaf"] / res["leaf_compact_json_bytes"]
+    res["glb_vs_leaf_set"] = res["distinct_glb_bytes_per_leaf"] / res["leaf_set_bytes_per_leaf"]
+    res["glb_vs_leaf_set6"] = res["distinct_glb_bytes_per_leaf"] / res["leaf_set6_bytes_per_leaf"]
     if scene_file:
         res["glb_vs_scene_file"] = res["distinct_glb_bytes"] / scene_file
     res["single_glb_vs_preset"] = res["single_leaf_glb_bytes_33x65"] / res["preset_toml_bytes"]
@@ -220,11 +212,16 @@ def format_table(res: dict[str, Any]) -> str:
                 rows.append((f"write .{fmt} ({kind})", (f"{res[f'{key}_us_per_leaf']:.0f} µs/leaf, "
                              f"{res[f'{key}_bytes_per_leaf']:,.0f} B/leaf"),
                              f"{res[f'{key}_s']:.2f} s, {res[f'{key}_bytes'] / 1e6:.1f} MB, {label}"))
+    lo, hi = res["preset_compact_bytes_range"]
     rows += [
-        ("leaf parameters (JSON)", f"{res['leaf_json_bytes']:.0f} B/leaf",
-         f"compact (defaults left out): {res['leaf_compact_json_bytes']:.0f} B"),
-        ("baked .glb ÷ leaf JSON", f"{res['glb_vs_leaf_json']:.0f}×",
-         f"÷ compact JSON: {res['glb_vs_compact_json']:.0f}×"),
+        ("leaf parameters, full JSON", f"{res['leaf_json_bytes']:.0f} B/leaf", "every field spelled out"),
+        ("compact leaf set (exact)", f"{res['leaf_set_bytes_per_leaf']:.0f} B/leaf",
+         "Ω, tinted colours and placement of every leaf, shortest float64 decimals"),
+        ("compact leaf set (6 digits)", f"{res['leaf_set6_bytes_per_leaf']:.0f} B/leaf", "--digits 6"),
+        ("compact preset (.leaf.json)", f"{res['preset_compact_bytes_median']:.0f} B median",
+         f"{lo}-{hi} B over the built-in presets"),
+        ("baked .glb ÷ leaf parameters", f"{res['glb_vs_leaf_set']:.0f}× exact",
+         f"{res['glb_vs_leaf_set6']:.0f}× at 6 digits, {res['glb_vs_leaf_json']:.0f}× full JSON"),
     ]
     if res.get("scene_file_bytes"):
         rows.append(("baked .glb ÷ scene file", f"{res['glb_vs_scene_file']:,.0f}×",

@@ -1,6 +1,10 @@
-"""``leafview export``: bake presets (or a scene file) into glTF, OBJ, PLY or USD files.
+"""``leafview export``: bake presets (or a scene file) into glTF, OBJ, PLY or USD files, or write
+their compact parametric form.
 
-One preset and ``-o FILE`` writes that file; several presets write one file each into
+``-o NAME.leaf.json`` writes one leaf in the compact form and ``-o NAME.leaves.json`` a leaf set
+(every leaf of the presets, or every leaf of a scene as built), see
+:mod:`leafview.model.compact`; ``--digits N`` rounds their numbers. One preset and ``-o FILE``
+writes that file (a leaf set and ``-o FILE``: all its placed leaves in that file); several presets write one file each into
 ``-o DIR`` (format from ``--format``, default glb); a scene file (a TOML/JSON document with
 ``[[species]]``, see :mod:`leafview.model.scene`) writes the whole scene into ``-o FILE``.
 Every input is validated before anything is baked; files are written atomically.
@@ -16,9 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from ..cli import _expand, int_pair
+from ..cli import _expand, int_in_range, int_pair, load_leaf_files
 from ..errors import UsageError
-from ..model.params import LeafParams
 from . import (
     DEFAULT_LENGTH_M,
     FORMATS,
@@ -79,7 +82,65 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--instancing", choices=INSTANCING_MODES, default="auto",
                         help="glTF scenes: EXT_mesh_gpu_instancing for shapes with >= 16 copies (auto), "
                              "never (nodes) or always (ext)")
+    parser.add_argument("--digits", type=_digits, default=None, metavar="N",
+                        help="for .leaf.json/.leaves.json: round numbers to N significant digits "
+                             "(default: exact, the shortest decimal of each float64)")
     parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+
+
+def _digits(text: str) -> int:
+    return int_in_range(text, lo=1, hi=17, what="digits", name="--digits")
+
+
+_PARAMETRIC = (".leaf.json", ".leaves.json")
+
+
+def _parametric(out: Path) -> str | None:
+    name = out.name.lower()
+    return next((s for s in _PARAMETRIC if name.endswith(s)), None)
+
+
+def _run_parametric(args: argparse.Namespace, paths: list[Path], kind: str, started: float) -> int:
+    """Write the compact form: one leaf (.leaf.json) or a leaf set (.leaves.json)."""
+    from tqdm import tqdm
+
+    from ..model.io import save_leaves, save_params
+
+    out = Path(args.output)
+    if args.format:
+        raise UsageError(f"-o {out} is a parametric file: --format applies to meshes only")
+    if out.is_dir():
+        raise UsageError(f"-o {out} is a directory; give a file name")
+    scenes = [p for p in paths if _is_scene(p)]
+    if scenes:
+        if len(paths) != 1 or kind != ".leaves.json":
+            raise UsageError(f"{scenes[0]} is a scene file: write its leaves on their own with -o NAME.leaves.json")
+        from ..model.scene import build_scene, load_scene
+
+        scene = build_scene(load_scene(scenes[0]))
+        bar = tqdm(total=len(scene), unit="leaf", desc="collecting", file=sys.stderr,
+                   disable=True if args.quiet else None)
+        leaves = []
+        for i in range(len(scene)):        # placed leaves, unnamed (a leaf set names them <stem>-<i>)
+            leaves.append(scene.placed_leaf(i))
+            bar.update(1)
+        bar.close()
+        what = f"{len(leaves):,} leaves of {scenes[0].name}"
+    else:
+        leaves = load_leaf_files(paths)
+        what = leaves[0].name if len(leaves) == 1 else f"{len(leaves)} leaves"
+    if kind == ".leaf.json":
+        if len(leaves) != 1:
+            raise UsageError(f"{len(leaves)} leaves do not fit one .leaf.json: use -o NAME.leaves.json")
+        save_params(leaves[0], out, digits=args.digits)
+    else:
+        save_leaves(leaves, out, digits=args.digits)
+    if not args.quiet:
+        size = out.stat().st_size
+        exact = "exact" if args.digits is None else f"{args.digits} significant digits"
+        print(f"wrote {out} ({what}, {size:,} bytes, {size / len(leaves):,.0f} B/leaf, {exact}) "
+              f"in {time.perf_counter() - started:.1f} s")
+    return 0
 
 
 def _is_scene(path: Path) -> bool:
@@ -139,14 +200,21 @@ def _run(args: argparse.Namespace) -> int:
 
     started = time.perf_counter()
     paths = _expand(args.inputs)
+    kind = _parametric(Path(args.output))
+    if kind:
+        return _run_parametric(args, paths, kind, started)
+    if args.digits is not None:
+        raise UsageError("--digits applies to .leaf.json/.leaves.json outputs only")
     scenes = [p for p in paths if _is_scene(p)]
     if scenes:
         if len(paths) != 1:
             raise UsageError(f"{scenes[0]} is a scene file: export it on its own")
         return _run_scene(args, scenes[0], started)
-    mode, out, fmt = _target(args, len(paths))
-    leaves = [LeafParams.load(p) for p in paths]          # validate everything first
-    names = [leaf.name or p.stem for leaf, p in zip(leaves, paths)]
+    leaves = load_leaf_files(paths)                       # validate everything first
+    if len(paths) == 1 and len(leaves) > 1 and Path(args.output).suffix.lower() in FORMATS:
+        return _run_scene(args, paths[0], started, leaves=leaves)   # a leaf set into one file
+    mode, out, fmt = _target(args, len(leaves))
+    names = [leaf.name for leaf in leaves]
     if mode == "dir" and len(set(names)) != len(names):
         dup = sorted({n for n in names if names.count(n) > 1})
         raise UsageError(f"several presets are named {', '.join(dup)}: their files would overwrite each other")
@@ -178,18 +246,17 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_scene(args: argparse.Namespace, path: Path, started: float) -> int:
+def _run_scene(args: argparse.Namespace, path: Path, started: float, leaves: list[Any] | None = None) -> int:
+    """One file for a scene recipe, or for the placed leaves of a leaf set (``leaves``)."""
     from tqdm import tqdm
+
+    from ..model.scene import build_scene, load_scene, scene_from_leaves
 
     out = Path(args.output)
     fmt = format_of(out)
     if args.format and args.format != out.suffix.lower().lstrip("."):
         raise UsageError(f"-o {out} is a {out.suffix} file but --format {args.format} was given")
-    try:
-        from ..model.scene import build_scene, load_scene
-    except ImportError as exc:
-        raise UsageError(f"{path}: scene files need leafview.model.scene ({exc})") from None
-    scene = build_scene(load_scene(path))
+    scene = build_scene(load_scene(path)) if leaves is None else scene_from_leaves(leaves, name=path.name)
     shapes = len(np.unique(scene.shape_ids)) if len(scene) else 0
     bar = tqdm(total=shapes, unit="shape", desc="baking", file=sys.stderr, disable=True if args.quiet else None)
     try:

@@ -1,4 +1,6 @@
-"""Reading and writing leaf presets as TOML (``schema = 1``) or JSON with the same structure.
+"""Reading and writing leaf presets as TOML (``schema = 1``) or JSON with the same structure,
+and the compact JSON form (:mod:`leafview.model.compact`): ``*.leaf.json`` files are written
+compact, and any JSON file whose top level has the ``leafview`` key is read as compact.
 
 Errors are :class:`~leafview.model.params.ParamError` naming the file and either ``line:col``
 (syntax) or the dotted field path (content).
@@ -15,9 +17,11 @@ from typing import Any
 import tomli_w
 
 from ..atomic import atomic_output
+from . import compact
 from .params import LeafParams, ParamError, parse_params
 
-__all__ = ["load_params", "save_params", "dumps_toml", "read_document"]
+__all__ = ["load_params", "save_params", "dumps_toml", "read_document", "load_leaves", "save_leaves",
+           "is_compact_path"]
 
 _FORMATS = {".toml": "toml", ".json": "json"}
 
@@ -67,27 +71,82 @@ def _toml_position(message: str) -> tuple[int, int]:
     return (int(m.group(1)), int(m.group(2))) if m else (0, 0)
 
 
+def _stem(p: Path) -> str:
+    name = p.name
+    for suffix in (".leaf.json", ".leaves.json"):
+        if name.lower().endswith(suffix):
+            return name[: -len(suffix)]
+    return p.stem
+
+
+def is_compact_path(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` names a compact leaf file (``*.leaf.json``), which :func:`save_params`
+    writes in the compact form."""
+    return Path(path).name.lower().endswith(".leaf.json")
+
+
 def load_params(path: str | os.PathLike[str]) -> LeafParams:
-    """Load and validate a preset; the file name becomes ``name`` when the file has none."""
+    """Load and validate a preset (full TOML/JSON or compact JSON); the file name becomes
+    ``name`` when the file has none."""
     p = Path(path)
     data = read_document(p)
     try:
-        params = parse_params(data)
+        if compact.is_compact(data):
+            if isinstance(data, dict) and "leaves" in data:
+                n = len(data["leaves"]) if isinstance(data["leaves"], list) else "?"
+                raise ParamError("leaves", f"a leaf set of {n} leaves, not one leaf: read it with "
+                                           "leafview.model.io.load_leaves (or leafview render)")
+            params = compact.parse_compact(data)
+        else:
+            params = parse_params(data)
     except ParamError as exc:
         raise exc.with_source(str(p)) from None
     if not params.name:
-        params = params.replace(name=p.stem)
+        params = params.replace(name=_stem(p))
     return params
+
+
+def load_leaves(path: str | os.PathLike[str]) -> list[LeafParams]:
+    """The leaves of a file: every leaf of a leaf set (``{"leafview":1,"leaves":[...]}``), or the
+    one leaf of any other leaf file. Unnamed leaves are named ``<stem>`` or ``<stem>-<i>``."""
+    p = Path(path)
+    data = read_document(p)
+    if not (compact.is_compact(data) and isinstance(data, dict) and "leaves" in data):
+        return [load_params(p)]
+    try:
+        leaves = compact.parse_leaves(data)
+    except ParamError as exc:
+        raise exc.with_source(str(p)) from None
+    return [leaf if leaf.name else leaf.replace(name=f"{_stem(p)}-{i}") for i, leaf in enumerate(leaves)]
+
+
+def save_leaves(leaves: list[LeafParams], path: str | os.PathLike[str], *, digits: int | None = None) -> None:
+    """Write a compact leaf set (``.json``, conventionally ``*.leaves.json``) atomically."""
+    p = Path(path)
+    if p.suffix.lower() != ".json":
+        raise ParamError("", f"a leaf set is JSON: expected a .leaves.json file name, got {p.suffix!r}", str(p))
+    if not leaves:
+        raise ParamError("leaves", "nothing to write: the leaf set is empty", str(p))
+    text = compact.dumps_leaves(leaves, digits=digits) + "\n"
+    with atomic_output(p) as tmp:
+        tmp.write_text(text, encoding="utf-8")
 
 
 def dumps_toml(params: LeafParams) -> str:
     return tomli_w.dumps(params.to_dict())
 
 
-def save_params(params: LeafParams, path: str | os.PathLike[str]) -> None:
-    """Write ``params`` to ``path`` (.toml or .json) atomically."""
+def save_params(params: LeafParams, path: str | os.PathLike[str], *, digits: int | None = None) -> None:
+    """Write ``params`` to ``path`` atomically: ``.toml``, ``.json`` (the full form) or
+    ``.leaf.json`` (the compact form; ``digits`` rounds its floats, see
+    :mod:`leafview.model.compact`)."""
     p = Path(path)
     fmt = _format_of(p)
-    text = dumps_toml(params) if fmt == "toml" else json.dumps(params.to_dict(), indent=2) + "\n"
+    if is_compact_path(p):
+        text = compact.dumps(params, digits=digits) + "\n"
+    elif digits is not None:
+        raise ParamError("digits", f"only the compact form (.leaf.json) rounds numbers, not {p.name}", str(p))
+    else:
+        text = dumps_toml(params) if fmt == "toml" else json.dumps(params.to_dict(), indent=2) + "\n"
     with atomic_output(p) as tmp:
         tmp.write_text(text, encoding="utf-8")

@@ -193,6 +193,32 @@ class Transform:
         m[:3, 3] = self.translation
         return m
 
+    @classmethod
+    def from_matrix(cls, m: ArrayLike, *, tol: float = 1e-6) -> "Transform":
+        """The transform whose :meth:`matrix` is ``m`` (a rotation times a uniform positive scale,
+        then a translation). Angles come back in (-180, 180]; the middle one (about y) in
+        [-90, 90]. Raises :class:`ParamError` for shear, non-uniform scale or a mirror."""
+        a = np.asarray(m, dtype=np.float64)
+        if a.shape != (4, 4) or not np.all(np.isfinite(a)):
+            raise ParamError("transform", f"expected a finite 4×4 matrix, got shape {a.shape}")
+        lin = a[:3, :3]
+        scale = float(np.cbrt(np.linalg.det(lin)))
+        if not scale > 0.0:
+            raise ParamError("transform", "the matrix mirrors or collapses space (determinant ≤ 0)")
+        r = lin / scale
+        if np.abs(r.T @ r - np.eye(3)).max() > tol:
+            raise ParamError("transform", "the matrix is not a rotation times a uniform scale")
+        # r = Rz(c) Ry(b) Rx(a): r[2,0] = -sin b, r[2,1] = cos b sin a, r[1,0] = sin c cos b
+        b = math.asin(float(np.clip(-r[2, 0], -1.0, 1.0)))
+        if abs(r[2, 0]) < 1.0 - 1e-12:
+            a_ = math.atan2(r[2, 1], r[2, 2])
+            c = math.atan2(r[1, 0], r[0, 0])
+        else:  # gimbal lock: only a - c (or a + c) is defined; put it all in a
+            a_ = math.atan2(-r[1, 2], r[1, 1])
+            c = 0.0
+        angles = tuple(float(math.degrees(x)) for x in (a_, b, c))
+        return cls(translation=tuple(float(x) for x in a[:3, 3]), rotation=angles, scale=scale)
+
 
 Pair = tuple[float, float]
 
@@ -302,16 +328,17 @@ class LeafParams:
     # -- files ----------------------------------------------------------------------------------
     @classmethod
     def load(cls, path: Any) -> "LeafParams":
-        """Read a ``.toml`` or ``.json`` preset (see :mod:`leafview.model.io`)."""
+        """Read a ``.toml`` or ``.json`` preset, full or compact (see :mod:`leafview.model.io`)."""
         from .io import load_params
 
         return load_params(path)
 
-    def save(self, path: Any) -> None:
-        """Write a ``.toml`` or ``.json`` preset atomically."""
+    def save(self, path: Any, *, digits: int | None = None) -> None:
+        """Write a ``.toml``, ``.json`` or compact ``.leaf.json`` preset atomically (``digits``:
+        significant digits of the compact form, default exact)."""
         from .io import save_params
 
-        save_params(self, path)
+        save_params(self, path, digits=digits)
 
     def replace(self, **groups: Any) -> "LeafParams":
         return replace(self, **groups)

@@ -46,7 +46,7 @@ from .stems import (GOLDEN_ANGLE, Mesh3, Nodes, Skeleton, auto_twigs, cross, div
                     grow_skeleton, merge_meshes, place_nodes, split_counts, sweep_tubes)
 
 __all__ = ["PlantSpec", "Placement", "grow_plant", "scatter", "PHYLLOTAXIS", "LAYOUTS",
-           "GOLDEN_ANGLE", "divergence", "PETIOLE_LIMIT", "PETIOLE_SIDES", "LEAF_BOX"]
+           "GOLDEN_ANGLE", "divergence", "PETIOLE_LIMIT", "PETIOLE_SIDES", "LEAF_BOX", "PLANT_RANGES"]
 
 PHYLLOTAXIS = ("golden", "alternate", "opposite", "whorled")
 LAYOUTS = ("plant", "field", "hedge")
@@ -73,6 +73,24 @@ def _num(name: str, value: Any, lo: float | None = None, hi: float | None = None
     if hi is not None and v > hi:
         raise ParamError(path, f"must be ≤ {hi:g}, got {v:g}")
     return v
+
+
+# The numeric settings of PlantSpec: name -> (lo, hi, open_lo, integer). The loader and the
+# published scene schema (leafview.schema) both read this table.
+PLANT_RANGES: dict[str, tuple[float | None, float | None, bool, bool]] = {
+    "whorl": (2, 12, False, True), "height": (0, 1e4, True, False),
+    "branches": (0, 500, False, True), "branch_angle": (0, 120, False, False),
+    "leaf_size": (0, 1e3, True, False), "size_falloff": (0, 0.95, False, False),
+    "petiole": (0, 10, False, False), "tilt": (-90, 90, False, False),
+    "light_following": (0, 1, False, False), "tilt_top": (-90, 90, False, False),
+    "petiole_angle": (5, 175, False, False), "branch_length": (0, 3, True, False),
+    "crown_base": (0, 0.95, False, False), "twigs": (-1, 200, False, True),
+    "twig_angle": (0, 120, False, False), "twig_length": (0, 3, True, False),
+    "internode": (0, 100, True, False), "gravitropism": (-1, 1, False, False),
+    "lean": (0, 45, False, False), "radius": (0, 1e3, True, False),
+    "taper": (0, 0.99, False, False), "variation": (0, 0.5, False, False),
+    "leaf_jitter": (0, 90, False, False),
+}
 
 
 @dataclass(frozen=True)
@@ -149,22 +167,7 @@ class PlantSpec:
         if math.hypot(*lv) < 1e-9:
             raise ParamError("plant.light", "must not be the zero vector")
         object.__setattr__(self, "light", lv)
-        ranges: dict[str, tuple[float | None, float | None, bool, bool]] = {
-            # name: (lo, hi, open_lo, integer)
-            "whorl": (2, 12, False, True), "height": (0, 1e4, True, False),
-            "branches": (0, 500, False, True), "branch_angle": (0, 120, False, False),
-            "leaf_size": (0, 1e3, True, False), "size_falloff": (0, 0.95, False, False),
-            "petiole": (0, 10, False, False), "tilt": (-90, 90, False, False),
-            "light_following": (0, 1, False, False), "tilt_top": (-90, 90, False, False),
-            "petiole_angle": (5, 175, False, False), "branch_length": (0, 3, True, False),
-            "crown_base": (0, 0.95, False, False), "twigs": (-1, 200, False, True),
-            "twig_angle": (0, 120, False, False), "twig_length": (0, 3, True, False),
-            "internode": (0, 100, True, False), "gravitropism": (-1, 1, False, False),
-            "lean": (0, 45, False, False), "radius": (0, 1e3, True, False),
-            "taper": (0, 0.99, False, False), "variation": (0, 0.5, False, False),
-            "leaf_jitter": (0, 90, False, False),
-        }
-        for name, (lo, hi, open_lo, integer) in ranges.items():
+        for name, (lo, hi, open_lo, integer) in PLANT_RANGES.items():
             object.__setattr__(self, name, _num(name, getattr(self, name), lo, hi,
                                                 open_lo=open_lo, integer=integer))
 

@@ -2,8 +2,9 @@
 
 A scene is stored as a recipe, not as a list of leaves (:class:`SceneSpec`, a TOML or JSON file
 with ``schema = 1``): the layout (one plant, a field or a hedge of plants, see
-:mod:`leafview.model.plants`), the leaf count, a seed, the species (each a full leaf parameter
-table, so a file is self-contained) with weights, and how much leaves vary within a species.
+:mod:`leafview.model.plants`), the leaf count, a seed, the species (each a leaf parameter
+table, written in the compact form of :mod:`leafview.model.compact`, so a file is
+self-contained) with weights, and how much leaves vary within a species.
 :func:`build_scene` expands it deterministically into a :class:`Scene`: per-leaf arrays that the
 GPU path packs into one storage-buffer row per leaf.
 
@@ -32,7 +33,7 @@ from numpy.typing import NDArray
 
 from .params import Bending, LeafParams, ParamError, Shape, Transform, parse_params
 
-__all__ = ["SceneSpec", "Scene", "build_scene", "load_scene", "save_scene", "LAYOUTS", "VARIED",
+__all__ = ["SceneSpec", "Scene", "build_scene", "load_scene", "save_scene", "scene_from_leaves", "LAYOUTS", "VARIED",
            "MAX_LEAVES", "vary_shape", "evaluate_leaf", "bend_deviation"]
 
 LAYOUTS = ("plant", "field", "hedge")
@@ -115,12 +116,10 @@ class SceneSpec:
                                  "colour_variation": self.colour_variation, "stems": self.stems}
         if self.name:
             scene["name"] = self.name
-        species = []
-        for leaf, w in zip(self.species, self.weights):
-            table = leaf.to_dict()
-            table.pop("schema", None)
-            table.pop("transform", None)
-            species.append({"weight": w, "leaf": table})
+        from .compact import compact_dict
+
+        species = [{"weight": w, "leaf": compact_dict(leaf.replace(transform=Transform()), version=False)}
+                   for leaf, w in zip(self.species, self.weights)]
         out: dict[str, Any] = {"schema": SCENE_SCHEMA, "scene": scene, "species": species}
         if self.plant:
             out["plant"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.plant.items()}
@@ -128,7 +127,8 @@ class SceneSpec:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], *, base: Path | None = None) -> "SceneSpec":
-        """Validate a scene document. A species is ``{leaf = {...}}`` (inline parameters) or
+        """Validate a scene document. A species is ``{leaf = {...}}`` (inline parameters, full or
+        compact: :mod:`leafview.model.compact`) or
         ``{preset = "name or path"}`` (resolved against ``base``, the file's folder)."""
         if not isinstance(data, Mapping):
             raise ParamError("", "expected a table at the top level")
@@ -160,14 +160,11 @@ class SceneSpec:
             if "preset" in item:
                 species.append(_load_preset(item["preset"], base, where))
             else:
-                table = dict(item["leaf"]) if isinstance(item["leaf"], Mapping) else item["leaf"]
-                if isinstance(table, dict):
-                    table.setdefault("schema", 1)
-                try:
-                    species.append(parse_params(table))
-                except ParamError as exc:
-                    raise ParamError(f"{where}.leaf.{exc.path}".rstrip("."), exc.message) from None
-            weights.append(item.get("weight", 1.0))
+                species.append(_species_leaf(item["leaf"], f"{where}.leaf"))
+            weight = item.get("weight", 1.0)
+            if isinstance(weight, bool) or not isinstance(weight, (int, float)):
+                raise ParamError(f"{where}.weight", f"must be a positive number, got {weight!r}")
+            weights.append(weight)
         plant = data.get("plant", {})
         if not isinstance(plant, Mapping):
             raise ParamError("plant", "must be a table")
@@ -181,6 +178,21 @@ class SceneSpec:
                    colour_variation=scene.get("colour_variation", defaults["colour_variation"].default),
                    stems=scene.get("stems", defaults["stems"].default),
                    plant=dict(plant), name=str(scene.get("name", "")))
+
+
+def _species_leaf(table: Any, where: str) -> LeafParams:
+    """A species' inline leaf: the compact form (it has ``omega``) or the full parameter table
+    (``schema`` may be left out)."""
+    from .compact import parse_compact
+
+    if isinstance(table, Mapping) and "omega" in table:
+        return parse_compact(table, where=where, version="leafview" in table)
+    if isinstance(table, Mapping):
+        table = {"schema": 1, **table}
+    try:
+        return parse_params(table)
+    except ParamError as exc:
+        raise ParamError(f"{where}.{exc.path}".rstrip("."), exc.message) from None
 
 
 def _check_int(path: str, value: Any, lo: int, hi: int) -> None:
@@ -264,7 +276,8 @@ class Scene:
     tint: (N,) float32 colour factor.
     matrices: (N, 4, 4) float64 leaf space -> world (column vectors), +z up.
     stems: branch geometry (positions, normals, triangle indices) or None.
-    placement: the :class:`~leafview.model.plants.Placement` it came from.
+    placement: the :class:`~leafview.model.plants.Placement` it came from (None for a scene of
+        explicit leaves, :func:`scene_from_leaves`).
     """
 
     spec: SceneSpec
@@ -307,6 +320,11 @@ class Scene:
         return sp.replace(shape=vary_shape(sp.shape, self.factors[i]), material=mat,
                           name=f"{sp.name or 'leaf'}_{i}")
 
+    def placed_leaf(self, i: int) -> LeafParams:
+        """Leaf ``i`` as a stand-alone leaf: :meth:`leaf` with ``matrices[i]`` as its transform and
+        no name (what a leaf set, :mod:`leafview.model.compact`, stores per leaf)."""
+        return self.leaf(i).replace(transform=Transform.from_matrix(self.matrices[i]), name="")
+
     def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Axis-aligned world box (lo, hi) of the leaf bases and stems (a camera framing hint)."""
         pts = self.matrices[:, :3, 3]
@@ -336,6 +354,21 @@ def build_scene(spec: SceneSpec) -> Scene:
     species = tuple(s.replace(transform=Transform()) for s in spec.species)
     return Scene(spec, species, species_id.astype(np.int32), factors, tint,
                  np.asarray(placement.matrices, np.float64), placement.stems, placement)
+
+
+def scene_from_leaves(leaves: Sequence[LeafParams], name: str = "") -> Scene:
+    """A scene of explicit, placed leaves (a leaf set, :mod:`leafview.model.compact`): each leaf
+    is its own species, drawn once at its own transform, without variation or stems. Its
+    per-species work (bend solve, culling sphere) therefore runs once per leaf."""
+    if not leaves:
+        raise ParamError("leaves", "a scene needs at least one leaf")
+    species = tuple(leaf.replace(transform=Transform()) for leaf in leaves)
+    spec = SceneSpec(species=species, leaves=len(leaves), variation=0.0, colour_variation=0.0, stems=False,
+                     name=name)
+    n = len(leaves)
+    matrices = np.stack([leaf.transform.matrix() for leaf in leaves]).astype(np.float64)
+    return Scene(spec, species, np.arange(n, dtype=np.int32), np.ones((n, len(VARIED)), np.float32),
+                 np.ones(n, np.float32), matrices, None, None)
 
 
 def evaluate_leaf(scene: Scene, i: int, u: NDArray[np.floating], v: NDArray[np.floating]) -> NDArray[np.float64]:
