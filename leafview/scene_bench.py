@@ -43,8 +43,8 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
     from .gpu.scene import CullSettings, SceneRenderer, lod_switch_error, scene_camera
     from .model.scene import build_scene
 
-    counts = (1_000, 5_000) if quick else (1_000, 10_000, 100_000)
-    progress = _Progress(len(counts) + 3)
+    leaf_counts = (1_000, 5_000) if quick else (1_000, 10_000, 100_000)
+    progress = _Progress(len(leaf_counts) + 3)
     own = ctx is None
     if own:
         ctx = create_headless_context()
@@ -53,7 +53,7 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
     on, off = CullSettings(), CullSettings(cull=False, lod=False)
     try:
         with OffscreenTarget(ctx, SIZE) as target:
-            for n in counts:
+            for n in leaf_counts:
                 progress.step(f"{n:,} leaves")
                 scene = build_scene(_spec(n))
                 with SceneRenderer(ctx, scene) as r:
@@ -72,7 +72,7 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
                         counts = r.level_counts()
                         row[view] = {"ms": 1e3 * t, "leaves_per_s": n / t, "drawn": int(counts.sum()),
                                      "levels": [int(c) for c in counts], "triangles": r.triangles(counts)}
-                        if view == "ground" and n == counts[-1]:
+                        if view == "ground" and n == leaf_counts[-1]:
                             ratios, t_off = [], []
                             for _ in range(2 if quick else 3):
                                 a = _median_time(lambda: frame(off), 1, ctx.finish)

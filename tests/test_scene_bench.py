@@ -1,0 +1,26 @@
+"""The scene benchmark's quick run: every figure of its table is measured and printed."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_scene_bench_quick_run_fills_the_table(gl):
+    from leafview.scene_bench import format_table, run
+
+    res = run(quick=True, ctx=gl.ctx)
+    assert res["gl_renderer"] == gl.ctx.info["GL_RENDERER"]
+    assert res["lod_speedup_leaves"] == 5_000 and res["lod_speedup"] > 0 and res["lod_off_ms"] > 0
+    assert set(res["frames"]) == {"1000", "5000"}
+    for row in res["frames"].values():
+        for view in ("ground", "three-quarter"):
+            assert 0 < row[view]["drawn"] <= 5_000 and sum(row[view]["levels"]) == row[view]["drawn"]
+    assert res["lod_switch_px"] >= 0 and res["param_vs_baked_speed"] > 0
+    table = format_table(res)
+    for key in ("lod_speedup", "lod_switch_px", "param_vs_baked_speed", "baked_vs_param_bytes"):
+        assert key in table
+    json.dumps(res)
