@@ -1,4 +1,5 @@
-"""The scene benchmark's quick run: every figure of its table is measured and printed."""
+"""Quick runs of the scene and shapes benchmarks: every figure of their tables is measured and
+printed (the export and core benchmarks have theirs in test_export_scene and test_benchmarks)."""
 
 from __future__ import annotations
 
@@ -23,4 +24,16 @@ def test_scene_bench_quick_run_fills_the_table(gl):
     table = format_table(res)
     for key in ("lod_speedup", "lod_switch_px", "param_vs_baked_speed", "baked_vs_param_bytes"):
         assert key in table
+    json.dumps(res)
+
+
+@pytest.mark.gl
+@pytest.mark.slow
+def test_shapes_bench_quick_run_fills_the_table(gl):
+    from leafview.shapes.bench import format_table, run
+
+    res = run(quick=True, ctx=gl.ctx)
+    table = format_table(res)
+    assert res["gl_renderer"] == gl.ctx.info["GL_RENDERER"] and "vs the paper's ~550 /s" in table
+    assert "landmark leaves, batched" in table and "batched ÷ per-leaf" in table
     json.dumps(res)
