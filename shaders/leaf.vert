@@ -37,8 +37,10 @@ void main() {
     // one half only (shape.half = ±1, e.g. each side of an asymmetric leaf): the grid's u in
     // [-1, 1] spreads over [0, 1] or [-1, 0], u' = (u + half) / 2 (leafview.model.leaf.drawn_uv)
     vec2 uv = in_uv;
+#ifndef LEAF_NO_HALF
     float half_side = LEAF.back.w;
     if (half_side != 0.0) uv.x = 0.5 * (uv.x + half_side);  // keeps the winding (front faces)
+#endif
     LeafEval e = leaf_eval(jitter_table, uv);
     vec3 n = leaf_normal(e, uv.y);
     v_object = e.L;

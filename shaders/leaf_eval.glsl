@@ -1,8 +1,9 @@
 // The leaf surface L_Ω(u, v) of seed 004 sec. 3 (eqs 2-6), its partial derivatives and normal,
 // plus the jittered silhouette of sec. 6.
-// Shader permutations: LEAF_NO_JITTER, LEAF_NO_RIPPLE and LEAF_NO_BEND compile the feature out
-// when no leaf of a draw uses it (leafview.gpu.layout.feature_defines); the results are
-// identical for the leaves they are used with.
+// Shader permutations: LEAF_NO_JITTER, LEAF_NO_RIPPLE, LEAF_NO_BEND and LEAF_NO_EXTENDED (and
+// LEAF_NO_HALF in leaf.vert) compile the feature out when no leaf of a draw uses it
+// (leafview.gpu.layout.feature_defines); the results are identical for the leaves they are used
+// with.
 // The including shader defines LEAF as the LeafData to read (the Leaf uniform block or one row of
 // the Leaves storage buffer). Fields are read through it where they are used, never copied as a
 // whole struct: a copy makes the compiler load every field (and on llvmpipe each storage-buffer
@@ -169,7 +170,11 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
 
     vec3 Pv, Qv, dPv, dQv, z, dz;
     vec2 Tv, dTv;
+#ifdef LEAF_NO_EXTENDED
+    const int rows = 0;           // no leaf of this draw is extended: the branches below fold away
+#else
     int rows = int(LEAF.tilt.w);  // 0: the paper's quartic; N: an extended silhouette of N rows
+#endif
     if (rows == 0) {
         // quartic weights at v for the inner points (the base is the origin, so it drops out) and
         // the apex, and their v-derivatives
@@ -186,9 +191,12 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
         dQv = dw.x * Q1 + dw.y * Q2 + dw.z * Q3;
         z = vec3(dot(w, zf), dot(w, zg), dot(w, zs));      // zF, zG, zS at v
         dz = vec3(dot(dw, zf), dot(dw, zg), dot(dw, zs));
-    } else {
+    }
+#ifndef LEAF_NO_EXTENDED
+    else {
         ext_silhouette(rows, v, Pv, Qv, dPv, dQv, z, dz, Tv, dTv);
     }
+#endif
 
     vec3 Av = cubic(LEAF_BASE, a1, a2, LEAF_APEX, v);
     vec3 dAv = cubic_dt(LEAF_BASE, a1, a2, LEAF_APEX, v);
@@ -201,12 +209,14 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
     e.Lu = sigma * db.x * (Av - Pv) + Qv + vec3(0.0, 0.0, sigma * dot(db.yzw, z));
     e.Lv = b.x * dAv + (1.0 - b.x) * dPv + u * dQv + vec3(0.0, 0.0, dot(b.yzw, dz));
     e.Luv = sigma * db.x * (dAv - dPv) + dQv + vec3(0.0, 0.0, sigma * dot(db.yzw, dz));
+#ifndef LEAF_NO_EXTENDED
     if (rows > 0) {  // tilted rows: + |u| T(v), T the side-independent tilt offsets
         e.L.xy += s * Tv;
         e.Lu.xy += sigma * Tv;
         e.Lv.xy += s * dTv;
         e.Luv.xy += sigma * dTv;
     }
+#endif
 
     // jittered silhouette (sec. 6): D = amp j(v) s^2 tau(v) sigma n(v)
 #ifndef LEAF_NO_JITTER

@@ -1,6 +1,8 @@
 """The rendering vertex shader, read back through transform feedback, against the numpy
 reference; the parameter layout against the linked program's reflection."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -194,13 +196,23 @@ def test_shader_permutations_match_the_full_program(gl, presets):
 
     from leafview.gpu.layout import feature_defines, pack_leaf
 
-    assert set(feature_defines(pack_leaf(presets["ovate"]))) == {"LEAF_NO_JITTER", "LEAF_NO_RIPPLE", "LEAF_NO_BEND"}
-    assert feature_defines(pack_leaf(presets["willow"])) == {"LEAF_NO_JITTER": 1}
+    from leafview.shapes import shapes_params
+
+    plain = {"LEAF_NO_EXTENDED", "LEAF_NO_HALF"}
+    assert set(feature_defines(pack_leaf(presets["ovate"]))) == {"LEAF_NO_JITTER", "LEAF_NO_RIPPLE", "LEAF_NO_BEND",
+                                                                  *plain}
+    assert set(feature_defines(pack_leaf(presets["willow"]))) == {"LEAF_NO_JITTER", *plain}
     assert "LEAF_NO_JITTER" not in feature_defines(pack_leaf(presets["serrate"]))
+    extended = shapes_params("elliptic-concave-extended", polish=False)
+    one_side = presets["ovate"].replace(shape=dataclasses.replace(presets["ovate"].shape, half=-1))
+    assert "LEAF_NO_EXTENDED" not in feature_defines(pack_leaf(extended))
+    assert "LEAF_NO_HALF" not in feature_defines(pack_leaf(one_side))
+    leaves = {**presets, "extended": extended, "one side": one_side,
+              "extended, one side": extended.replace(shape=dataclasses.replace(extended.shape, half=1))}
     uv = leafview.model.grid_uv(9, 15)
     vbo = gl.ctx.buffer(uv.tobytes())
     try:
-        for name, leaf in presets.items():
+        for name, leaf in leaves.items():
             variant = gl._program(feature_defines(pack_leaf(leaf)))
             gl.set_leaf(leaf)
             outs = []

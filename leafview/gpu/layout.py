@@ -189,10 +189,15 @@ def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: 
 
 
 def feature_defines(records: np.ndarray) -> dict[str, int]:
-    """Shader permutation for a draw of ``records``: compile out jitter, ripples or bending when
-    no record uses them (llvmpipe runs vertex shaders on the CPU, where unused branches cost)."""
+    """Shader permutation for a draw of ``records``: compile out jitter, ripples, bending, the
+    extended silhouette or the one-sided half when no record uses them (llvmpipe runs vertex
+    shaders on the CPU, where unused branches cost)."""
     recs = np.atleast_1d(records)
     defines = {}
+    if not (recs["tilt"][:, 3] > 0).any():
+        defines["LEAF_NO_EXTENDED"] = 1
+    if not (recs["back"][:, 3] != 0).any():
+        defines["LEAF_NO_HALF"] = 1
     if not (recs["jitter"][:, 0] > 0).any():
         defines["LEAF_NO_JITTER"] = 1
     if not (recs["deform"][:, 0] > 0).any():
