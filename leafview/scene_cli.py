@@ -130,7 +130,7 @@ def _leaf_set(args: argparse.Namespace) -> list[Any] | None:
     if not args.scene or Path(args.scene).suffix.lower() != ".json":
         return None
     from .model.compact import is_compact
-    from .model.io import load_leaves, read_document
+    from .model.io import leaves_from_document, read_document
 
     doc = read_document(args.scene)
     if not is_compact(doc):
@@ -140,7 +140,7 @@ def _leaf_set(args: argparse.Namespace) -> list[Any] | None:
     if overrides:
         raise UsageError(f"{args.scene} is a leaf set of explicit leaves: {', '.join(overrides)} "
                          "apply to scene recipes only")
-    return load_leaves(args.scene)
+    return leaves_from_document(doc, args.scene)
 
 
 def _save(scene: Any, spec: SceneSpec, path: str, explicit: bool) -> None:
@@ -149,7 +149,7 @@ def _save(scene: Any, spec: SceneSpec, path: str, explicit: bool) -> None:
     from .model.scene import save_scene
 
     if path.lower().endswith(".leaves.json"):
-        save_leaves([scene.placed_leaf(i) for i in range(len(scene))], path)
+        save_leaves(scene.placed_leaves(), path)
     elif explicit:
         raise UsageError(f"--save {path}: a leaf set has no recipe; save it as NAME.leaves.json")
     else:

@@ -170,14 +170,13 @@ def leaf_schema() -> dict[str, Any]:
 def _omega_schema() -> dict[str, Any]:
     """Ω as the compact form writes it: one alternative per accepted length, each entry typed and
     bounded as its shape field is (v̄ inside (0, 1), tilts within ±90°)."""
-    from .model.compact import omega_sizes
 
     specs = P.field_specs()
     vbar = {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1}
     plain = {"type": "number"}
     tilt = _number(specs["shape.tilt"])
     alternatives = []
-    for size, n in omega_sizes().items():
+    for size, n in P.omega_sizes().items():
         items = [plain] * 6
         for _ in range(n):
             items += [vbar, plain, plain]

@@ -4,9 +4,10 @@ their compact parametric form.
 ``-o NAME.leaf.json`` writes one leaf in the compact form and ``-o NAME.leaves.json`` a leaf set
 (every leaf of the presets, or every leaf of a scene as built), see
 :mod:`leafview.model.compact`; ``--digits N`` rounds their numbers. One preset and ``-o FILE``
-writes that file (a leaf set and ``-o FILE``: all its placed leaves in that file); several presets write one file each into
-``-o DIR`` (format from ``--format``, default glb); a scene file (a TOML/JSON document with
-``[[species]]``, see :mod:`leafview.model.scene`) writes the whole scene into ``-o FILE``.
+writes that file (a leaf set and ``-o FILE``: all its placed leaves in that file); several
+presets write one file each into ``-o DIR`` (format from ``--format``, default glb); a scene
+file (a TOML/JSON document with ``[[species]]``, see :mod:`leafview.model.scene`) writes the
+whole scene into ``-o FILE``.
 Every input is validated before anything is baked; files are written atomically.
 """
 
@@ -118,13 +119,9 @@ def _run_parametric(args: argparse.Namespace, paths: list[Path], kind: str, star
         from ..model.scene import build_scene, load_scene
 
         scene = build_scene(load_scene(scenes[0]))
-        bar = tqdm(total=len(scene), unit="leaf", desc="collecting", file=sys.stderr,
-                   disable=True if args.quiet else None)
-        leaves = []
-        for i in range(len(scene)):        # placed leaves, unnamed (a leaf set names them <stem>-<i>)
-            leaves.append(scene.placed_leaf(i))
-            bar.update(1)
-        bar.close()
+        with tqdm(total=len(scene), unit="leaf", desc="collecting", file=sys.stderr,
+                  disable=True if args.quiet else None) as bar:
+            leaves = scene.placed_leaves(bar.update)   # unnamed: a leaf set names them <stem>-<i>
         what = f"{len(leaves):,} leaves of {scenes[0].name}"
     else:
         leaves = load_leaf_files(paths)

@@ -37,27 +37,19 @@ import re
 from typing import Any, Mapping, Sequence
 
 from .params import (
-    MAX_SILHOUETTE_ROWS,
-    OMEGA_SIZE,
     SCHEMA_VERSION,
     LeafParams,
     ParamError,
     parse_params,
+    split_omega,
 )
 
-__all__ = ["COMPACT_VERSION", "OPTIONAL_GROUPS", "compact_dict", "dumps", "dumps_leaves", "group_defaults", "is_compact",
-           "loads", "omega_path", "omega_sizes", "parse_compact", "parse_leaves", "round_params"]
+__all__ = ["COMPACT_VERSION", "OPTIONAL_GROUPS", "compact_dict", "dumps", "dumps_leaves", "is_compact",
+           "loads", "omega_path", "parse_compact", "parse_leaves", "round_params"]
 
 COMPACT_VERSION = 1
 OPTIONAL_GROUPS = ("jitter", "material", "transform", "ripple", "bending")
 _LEAF_KEYS = ("name", "omega", "half", *OPTIONAL_GROUPS)
-
-
-def omega_sizes() -> dict[int, int]:
-    """Accepted Ω lengths -> silhouette rows N (21 is the paper's quartic, N = 3 without tilts)."""
-    out = {OMEGA_SIZE: 3}
-    out.update({6 + 6 * n: n for n in range(3, MAX_SILHOUETTE_ROWS + 1)})
-    return out
 
 
 # -- numbers ------------------------------------------------------------------------------
@@ -91,7 +83,7 @@ def _text(value: Any) -> str:
 
 
 def _map_floats(value: Any, digits: int | None) -> Any:
-    if isinstance(value, bool) or isinstance(value, int):
+    if isinstance(value, int):      # bools and ints stay as they are
         return value
     if isinstance(value, float):
         return _round(value, digits)
@@ -180,22 +172,10 @@ def _check_version(value: Any) -> None:
 def _shape_table(omega: Any) -> dict[str, Any]:
     if not isinstance(omega, list):
         raise ParamError("omega", f"expected a list of numbers (Ω), got {type(omega).__name__}")
-    sizes = omega_sizes()
-    if len(omega) not in sizes:
-        raise ParamError("omega", f"expected {OMEGA_SIZE} numbers (or 6 + 6N for N = 3..{MAX_SILHOUETTE_ROWS} "
-                                  f"silhouette rows with tilts), got {len(omega)}")
     for k, x in enumerate(omega):
         if isinstance(x, bool) or not isinstance(x, (int, float)):
             raise ParamError(f"omega[{k}]", f"expected a number, got {type(x).__name__} {x!r}")
-    w = [float(x) for x in omega]
-    n = sizes[len(w)]
-    e = 6 + 3 * n
-    table: dict[str, Any] = {"a1": w[0:3], "a2": w[3:6],
-                             "silhouette": [w[6 + 3 * i:9 + 3 * i] for i in range(n)],
-                             "zf": w[e:e + n], "zg": w[e + n:e + 2 * n]}
-    if len(w) != OMEGA_SIZE:
-        table["tilt"] = w[e + 2 * n:e + 3 * n]
-    return table
+    return split_omega([float(x) for x in omega])
 
 
 def parse_compact(doc: Any, *, where: str = "", version: bool = True) -> LeafParams:
@@ -262,9 +242,3 @@ def parse_leaves(doc: Any) -> list[LeafParams]:
     if not isinstance(leaves, list) or not leaves:
         raise ParamError("leaves", "expected a non-empty list of compact leaves")
     return [parse_compact(item, where=f"leaves[{i}]", version=False) for i, item in enumerate(leaves)]
-
-
-def group_defaults() -> dict[str, dict[str, Any]]:
-    """The default value of every optional field, as the compact form leaves it out."""
-    default = LeafParams().to_dict()
-    return {g: default[g] for g in OPTIONAL_GROUPS}

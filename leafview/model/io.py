@@ -21,7 +21,7 @@ from . import compact
 from .params import LeafParams, ParamError, parse_params
 
 __all__ = ["load_params", "save_params", "dumps_toml", "read_document", "load_leaves", "save_leaves",
-           "is_compact_path"]
+           "leaves_from_document", "is_compact_path"]
 
 _FORMATS = {".toml": "toml", ".json": "json"}
 
@@ -90,34 +90,35 @@ def load_params(path: str | os.PathLike[str]) -> LeafParams:
     ``name`` when the file has none."""
     p = Path(path)
     data = read_document(p)
+    if _is_leaf_set(data):
+        n = len(data["leaves"]) if isinstance(data["leaves"], list) else "?"
+        raise ParamError("leaves", f"a leaf set of {n} leaves, not one leaf: read it with "
+                                   "leafview.model.io.load_leaves (or leafview render)", str(p))
+    return leaves_from_document(data, p)[0]
+
+
+def _is_leaf_set(data: Any) -> bool:
+    return compact.is_compact(data) and "leaves" in data
+
+
+def leaves_from_document(data: Any, path: str | os.PathLike[str]) -> list[LeafParams]:
+    """The validated leaves of a parsed leaf file (full, compact or leaf set) read from ``path``
+    (named in errors; its stem names unnamed leaves: ``<stem>``, or ``<stem>-<i>`` in a set)."""
+    p = Path(path)
     try:
-        if compact.is_compact(data):
-            if isinstance(data, dict) and "leaves" in data:
-                n = len(data["leaves"]) if isinstance(data["leaves"], list) else "?"
-                raise ParamError("leaves", f"a leaf set of {n} leaves, not one leaf: read it with "
-                                           "leafview.model.io.load_leaves (or leafview render)")
-            params = compact.parse_compact(data)
-        else:
-            params = parse_params(data)
+        if _is_leaf_set(data):
+            leaves = compact.parse_leaves(data)
+            return [leaf if leaf.name else leaf.replace(name=f"{_stem(p)}-{i}") for i, leaf in enumerate(leaves)]
+        params = compact.parse_compact(data) if compact.is_compact(data) else parse_params(data)
     except ParamError as exc:
         raise exc.with_source(str(p)) from None
-    if not params.name:
-        params = params.replace(name=_stem(p))
-    return params
+    return [params if params.name else params.replace(name=_stem(p))]
 
 
 def load_leaves(path: str | os.PathLike[str]) -> list[LeafParams]:
     """The leaves of a file: every leaf of a leaf set (``{"leafview":1,"leaves":[...]}``), or the
-    one leaf of any other leaf file. Unnamed leaves are named ``<stem>`` or ``<stem>-<i>``."""
-    p = Path(path)
-    data = read_document(p)
-    if not (compact.is_compact(data) and isinstance(data, dict) and "leaves" in data):
-        return [load_params(p)]
-    try:
-        leaves = compact.parse_leaves(data)
-    except ParamError as exc:
-        raise exc.with_source(str(p)) from None
-    return [leaf if leaf.name else leaf.replace(name=f"{_stem(p)}-{i}") for i, leaf in enumerate(leaves)]
+    one leaf of any other leaf file."""
+    return leaves_from_document(read_document(path), path)
 
 
 def save_leaves(leaves: list[LeafParams], path: str | os.PathLike[str], *, digits: int | None = None) -> None:

@@ -45,6 +45,8 @@ __all__ = [
     "Bending",
     "LeafParams",
     "field_specs",
+    "omega_sizes",
+    "split_omega",
 ]
 
 SCHEMA_VERSION = 1
@@ -293,20 +295,9 @@ class LeafParams:
         extended silhouette of N rows with tilts, as :meth:`to_vector` writes it); jitter off,
         everything else at its default."""
         w = np.asarray(omega, dtype=np.float64)
-        sizes = {6 + 6 * n: n for n in range(3, MAX_SILHOUETTE_ROWS + 1)}
-        if w.ndim != 1 or (w.size != OMEGA_SIZE and w.size not in sizes):
-            raise ParamError("omega", f"expected {OMEGA_SIZE} numbers (or 6 + 6N for N = 3..{MAX_SILHOUETTE_ROWS} "
-                             f"silhouette rows with tilts), got shape {w.shape}")
-        n = 3 if w.size == OMEGA_SIZE else sizes[w.size]
-        e = 6 + 3 * n
-        data = {
-            "a1": w[0:3], "a2": w[3:6],
-            "silhouette": w[6:e].reshape(n, 3),
-            "zf": w[e:e + n], "zg": w[e + n:e + 2 * n],
-        }
-        if w.size != OMEGA_SIZE:
-            data["tilt"] = w[e + 2 * n:e + 3 * n]
-        shape = _parse_group(Shape, {k: v.tolist() for k, v in data.items()}, "shape", required=True)
+        if w.ndim != 1:
+            raise ParamError("omega", f"expected a flat list of numbers, got shape {w.shape}")
+        shape = _parse_group(Shape, split_omega(w.tolist()), "shape", required=True)
         return cls(shape=shape)
 
     # -- dicts ----------------------------------------------------------------------------------
@@ -342,6 +333,29 @@ class LeafParams:
 
     def replace(self, **groups: Any) -> "LeafParams":
         return replace(self, **groups)
+
+
+def omega_sizes() -> dict[int, int]:
+    """Accepted lengths of Ω -> silhouette rows N: 21 (the paper's quartic, N = 3, no tilts) and
+    6 + 6N for an extended silhouette of N = 3..MAX_SILHOUETTE_ROWS rows with tilts."""
+    return {OMEGA_SIZE: 3, **{6 + 6 * n: n for n in range(3, MAX_SILHOUETTE_ROWS + 1)}}
+
+
+def split_omega(w: list[float]) -> dict[str, Any]:
+    """Ω (see the module docstring) as the fields of a ``shape`` table: ``a1``, ``a2``,
+    ``silhouette`` rows, ``zf``, ``zg`` and, for an extended silhouette, ``tilt``. Raises
+    :class:`ParamError` ("omega") for a length that is not in :func:`omega_sizes`."""
+    sizes = omega_sizes()
+    if len(w) not in sizes:
+        raise ParamError("omega", f"expected {OMEGA_SIZE} numbers (or 6 + 6N for N = 3..{MAX_SILHOUETTE_ROWS} "
+                                  f"silhouette rows with tilts), got {len(w)}")
+    n = sizes[len(w)]
+    e = 6 + 3 * n
+    table: dict[str, Any] = {"a1": w[0:3], "a2": w[3:6], "silhouette": [w[6 + 3 * i:9 + 3 * i] for i in range(n)],
+                             "zf": w[e:e + n], "zg": w[e + n:e + 2 * n]}
+    if len(w) != OMEGA_SIZE:
+        table["tilt"] = w[e + 2 * n:e + 3 * n]
+    return table
 
 
 def field_specs() -> dict[str, FieldSpec]:

@@ -325,6 +325,15 @@ class Scene:
         no name (what a leaf set, :mod:`leafview.model.compact`, stores per leaf)."""
         return self.leaf(i).replace(transform=Transform.from_matrix(self.matrices[i]), name="")
 
+    def placed_leaves(self, progress: Any = None) -> list[LeafParams]:
+        """Every :meth:`placed_leaf`, in order (``progress(1)`` after each, e.g. a tqdm update)."""
+        out = []
+        for i in range(len(self)):
+            out.append(self.placed_leaf(i))
+            if progress is not None:
+                progress(1)
+        return out
+
     def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Axis-aligned world box (lo, hi) of the leaf bases and stems (a camera framing hint)."""
         pts = self.matrices[:, :3, 3]
