@@ -152,10 +152,9 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
 
     from ..model import compact
 
-    leaves = distinct.shapes()[:200]
-    res["leaf_json_bytes"] = float(np.mean([len(json.dumps(p.to_dict(), separators=(",", ":"))) for p in leaves]))
-    placed = [distinct.placed_leaf(i) if hasattr(distinct, "placed_leaf") else leaf for i, leaf in
-              enumerate(distinct.shapes())]
+    shapes = distinct.shapes()
+    res["leaf_json_bytes"] = float(np.mean([len(json.dumps(p.to_dict(), separators=(",", ":"))) for p in shapes[:200]]))
+    placed = distinct.placed_leaves() if hasattr(distinct, "placed_leaves") else shapes
     res["leaf_set_bytes_per_leaf"] = len(compact.dumps_leaves(placed)) / len(placed)
     res["leaf_set6_bytes_per_leaf"] = len(compact.dumps_leaves(placed, digits=6)) / len(placed)
     preset_sizes = [len(compact.dumps(LeafParams.load(p))) for p in builtin_presets().values()]

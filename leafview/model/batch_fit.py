@@ -188,11 +188,18 @@ def _split_batch(outlines: NDArray[np.float64]) -> tuple[NDArray[np.float64], ND
 
 
 # -- batched geometry -----------------------------------------------------------------------------
+def _chord(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(B, K): chord-length parameters of the (B, K, 2) polylines, 0 at the first point and 1 at
+    the last (0 throughout for a polyline of zero length)."""
+    d = np.concatenate([np.zeros((len(points), 1)),
+                        np.cumsum(np.linalg.norm(np.diff(points, axis=1), axis=2), axis=1)], axis=1)
+    return d / np.where(d[:, -1:] > 0.0, d[:, -1:], 1.0)
+
+
 def _resample(points: NDArray[np.float64], n: int) -> NDArray[np.float64]:
     """(B, n, 2): every polyline of the (B, K, 2) batch resampled evenly in arc length."""
     b = len(points)
-    d = np.concatenate([np.zeros((b, 1)), np.cumsum(np.linalg.norm(np.diff(points, axis=1), axis=2), axis=1)], axis=1)
-    d /= np.where(d[:, -1:] > 0.0, d[:, -1:], 1.0)
+    d = _chord(points)
     lane = 2.0 * np.arange(b)[:, None]          # row b lives in [2b, 2b + 1]: one global interpolation
     xp = (d + lane).ravel()
     x = (np.linspace(0.0, 1.0, n)[None, :] + lane).ravel()
@@ -396,9 +403,7 @@ def fit_sides(points: ArrayLike, rows: int, *, start: NDArray[np.float64] | None
     gn_rounds = _GN_ROUNDS if gn_rounds is None else gn_rounds
     pts = _resample(_as_batch(points, "points", 3), _SAMPLES)
     n = rows + 1
-    d = np.concatenate([np.zeros((len(pts), 1)), np.cumsum(np.linalg.norm(np.diff(pts, axis=1), axis=2), axis=1)],
-                       axis=1)
-    t = d / d[:, -1:]
+    t = _chord(pts)
     for _ in range(linear_rounds):
         inner = _linear_solve(pts, t, n)
         t = _project(_with_ends(inner), pts, t)
@@ -423,9 +428,7 @@ def minimax_sides(points: ArrayLike, ctrl: NDArray[np.float64], rounds: int = _M
     pts = _resample(_as_batch(points, "points", 3), _SAMPLES)
     n = ctrl.shape[1] - 1
     inner = ctrl[:, 1:-1].copy()
-    d = np.concatenate([np.zeros((len(pts), 1)), np.cumsum(np.linalg.norm(np.diff(pts, axis=1), axis=2), axis=1)],
-                       axis=1)
-    t = _project(ctrl, pts, d / d[:, -1:], steps=3 * _PROJECT_STEPS)
+    t = _project(ctrl, pts, _chord(pts), steps=3 * _PROJECT_STEPS)
     def worst(c: NDArray[np.float64], tt: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.linalg.norm(bernstein(n, tt) @ c - pts, axis=2)
 
@@ -620,6 +623,18 @@ def fit_outlines(outlines: ArrayLike | None = None, *, right: ArrayLike | None =
     rows = np.zeros(b, dtype=np.int64)
     attempts: dict[int, int] = {}
     todo = np.arange(b)
+
+    def keep_better(ctrl: NDArray[np.float64], n_rows: int) -> NDArray[np.bool_]:
+        """Measure the fits ``ctrl`` of the leaves ``todo``, keep each where it beats the leaf's
+        best so far (no fold first, then the smaller error); True where it meets the target."""
+        fitted = [_params_from_controls(c, names[i]) for c, i in zip(ctrl, todo)]
+        err = meter(controls_from_params(fitted), todo)
+        jmin = np.array([float(_jacobian_grid(c).min()) for c in ctrl])
+        for k, i in enumerate(todo):
+            if params[i] is None or (jmin[k] > 0.0, -err[k, 0]) > (jac[i] > 0.0, -errors[i, 0]):
+                params[i], errors[i], jac[i], rows[i] = fitted[k], err[k], jmin[k], n_rows
+        return (err[:, 0] <= target) & (jmin > 0.0)
+
     last: NDArray[np.float64] | None = None   # previous round's fits of the leaves still to do
     keep = np.ones(b, dtype=bool)
     for n_rows in range(min_rows, max_rows + 1):
@@ -627,27 +642,13 @@ def fit_outlines(outlines: ArrayLike | None = None, *, right: ArrayLike | None =
             break
         attempts[n_rows] = int(todo.size)
         ctrl = fit_sides(mean[todo], n_rows, start=None if last is None else last[keep])
-        fitted = [_params_from_controls(c, names[i]) for c, i in zip(ctrl, todo)]
-        err = meter(controls_from_params(fitted), todo)
-        jmin = np.array([float(_jacobian_grid(c).min()) for c in ctrl])
-        better = (jmin > 0.0, -err[:, 0])
-        for k, i in enumerate(todo):
-            if params[i] is None or (better[0][k], better[1][k]) > (jac[i] > 0.0, -errors[i, 0]):
-                params[i], errors[i], jac[i], rows[i] = fitted[k], err[k], jmin[k], n_rows
-        done = (err[:, 0] <= target) & (jmin > 0.0)
+        done = keep_better(ctrl, n_rows)
         todo, last, keep = todo[~done], ctrl, ~done
 
     if todo.size and last is not None and last.shape[1] == max_rows + 2:
         # the leaves still missing at max_rows: minimise the largest distance instead of the sum
         attempts[-1] = int(todo.size)
-        ctrl = minimax_sides(mean[todo], last[keep])
-        fitted = [_params_from_controls(c, names[i]) for c, i in zip(ctrl, todo)]
-        err = meter(controls_from_params(fitted), todo)
-        jmin = np.array([float(_jacobian_grid(c).min()) for c in ctrl])
-        for k, i in enumerate(todo):
-            if (jmin[k] > 0.0, -err[k, 0]) > (jac[i] > 0.0, -errors[i, 0]):
-                params[i], errors[i], jac[i], rows[i] = fitted[k], err[k], jmin[k], max_rows
-        todo = todo[~((err[:, 0] <= target) & (jmin > 0.0))]
+        todo = todo[~keep_better(minimax_sides(mean[todo], last[keep]), max_rows)]
 
     used = np.zeros(b, dtype=bool)
     t_fb = time.perf_counter()

@@ -27,7 +27,7 @@ from ..model.shapes import catalogue as _catalogue
 INSTANCE_TARGET = 0.01   # random instances: the issue's goal, 1 % of the leaf length
 
 __all__ = ["INSTANCE_TARGET", "ShapeEntry", "ShapeFitInfo", "catalogue", "landmark_leaf", "shapes_dir",
-           "shape_names", "shapes_params", "fit_info", "fit_landmark_leaf"]
+           "shape_names", "shapes_params", "fit_info", "fit_landmark_leaf", "instances"]
 
 
 def catalogue() -> list[ShapeEntry]:
@@ -150,8 +150,8 @@ def instances(names_or_leaves: Any, seeds: Any, amount: float = 0.2, *, target: 
     """
     import numpy as np
 
-    from ..model.batch_fit import fit_outlines
-    from ..model.landmarks import LandmarkLeaf, outline
+    from ..model.batch_fit import fit_landmark_leaves
+    from ..model.landmarks import LandmarkLeaf
     from ..model.shapes import random_instance
 
     many = list(names_or_leaves) if isinstance(names_or_leaves, (list, tuple)) else [names_or_leaves]
@@ -177,8 +177,5 @@ def instances(names_or_leaves: Any, seeds: Any, amount: float = 0.2, *, target: 
             raise ParamError(f"names_or_leaves[{k}]", f"expected a catalogue name or a LandmarkLeaf, got {type(item).__name__}")
         leaves.append(random_instance(base, int(seed), amount))
         names.append(f"{label}#{int(seed)}")
-    rings = np.stack([outline(leaf, n) for leaf in leaves])
-    return fit_outlines(rings, target=target, names=names).params
+    return fit_landmark_leaves(leaves, n=n, target=target, names=names).params
 
-
-__all__ += ["instances"]
