@@ -14,7 +14,7 @@ baseline. Numbers are timings on *this* machine; the GL renderer is printed with
 
 import sys
 
-from leafview.benchmarks import main
+from leafview.bench.core import main
 
 if __name__ == "__main__":
     sys.exit(main(sys.argv[1:]))

@@ -1,36 +1,53 @@
 """leafview: parametric plant leaves evaluated on the GPU.
 
-The model (``LeafParams``, ``evaluate``, ``tessellate``) is pure numpy; ``render`` and ``gpu``
-load OpenGL on first use.
+The model (``LeafParams``, ``evaluate``, ``tessellate``) is pure numpy and loads with the package.
+The other public modules load on first use, so ``import leafview`` stays light: ``landmarks``,
+``shapes``, ``beam`` and ``edits`` (numpy/scipy), ``gpu`` and ``render`` (OpenGL).
 """
 
 from __future__ import annotations
 
+import importlib
 from typing import Any
 
-from .model import (FieldSpec, Jitter, LeafParams, Material, Mesh, ParamError, Shape, Transform,
-                    evaluate, field_specs, normals, partials, tessellate)
+from numpy.typing import NDArray
 
-__version__ = "0.1.0"
+from leafview._version import __version__
+from leafview.core import FieldSpec, Jitter, LeafParams, Material, ParamError, Shape, Transform, field_specs
+from leafview.deform.fbm import check_signal_args, fbm_signal
+from leafview.deform.surface import Mesh, evaluate, normals, partials, tessellate
+from leafview.errors import LeafviewError
 
-__all__ = ["LeafParams", "Shape", "Jitter", "Material", "Transform", "ParamError", "FieldSpec",
+__all__ = ["LeafParams", "Shape", "Jitter", "Material", "Transform", "ParamError", "LeafviewError", "FieldSpec",
            "field_specs", "evaluate", "normals", "partials", "tessellate", "Mesh", "render", "gpu",
-           "edits", "beam", "fbm_noise", "__version__"]
+           "edits", "beam", "landmarks", "shapes", "fbm_noise", "__version__"]
+
+# public modules loaded on first attribute access: name -> module
+_LAZY_MODULES = {
+    "gpu": "leafview.gpu",
+    "edits": "leafview.core.edits",
+    "beam": "leafview.beam",
+    "landmarks": "leafview.landmarks",
+    "shapes": "leafview.shapes",
+}
 
 
 def __getattr__(name: str) -> Any:
-    import importlib
-
-    if name == "gpu":
-        return importlib.import_module(".gpu", __name__)
+    if name in _LAZY_MODULES:
+        return importlib.import_module(_LAZY_MODULES[name])
     if name == "render":
-        return importlib.import_module(".gpu", __name__).render
-    if name == "edits":
-        return importlib.import_module(".model.edits", __name__)
-    if name == "beam":
-        return importlib.import_module(".beam", __name__)
-    if name == "shapes_params":
-        return importlib.import_module(".shapes", __name__).shapes_params
-    if name == "fbm_noise":
-        return importlib.import_module(".model.fbm", __name__).fbm_noise
+        return importlib.import_module("leafview.gpu").render
     raise AttributeError(f"module 'leafview' has no attribute {name!r}")
+
+
+def fbm_noise(n: int, beta: float, seed: int, backend: str = "cpu") -> NDArray[Any]:
+    """fBm noise of Geng, Hu & Zhang 2014, eqs 1-2: ``backend="cpu"`` (numpy, float64) or ``"gpu"``
+    (compute shader, float32, same random numbers; agrees within 1e-4 of the signal's std)."""
+    if backend == "cpu":
+        return fbm_signal(n, beta, seed)
+    if backend == "gpu":
+        check_signal_args(n, beta)
+        gpu = importlib.import_module("leafview.gpu")   # GL only when asked for
+        result: NDArray[Any] = gpu.gpu_fbm_noise(n, beta, seed)
+        return result
+    raise ValueError(f"backend must be 'cpu' or 'gpu', got {backend!r}")

@@ -1,5 +1,6 @@
-"""``leafview.beam``: the cantilever beam of seed 002 (eq. 4); see :mod:`leafview.model.beam`."""
+"""``leafview.beam``: the cantilever beam of Geng, Hu & Zhang 2014 (eq. 4); the implementation is
+:mod:`leafview.deform.beam`."""
 
-from .model.beam import BEND_SAMPLES, BendProfile, bend_profile, residual, solve_bending
+from leafview.deform.beam import BEND_SAMPLES, BendProfile, bend_profile, residual, solve_bending
 
 __all__ = ["solve_bending", "residual", "bend_profile", "BendProfile", "BEND_SAMPLES"]

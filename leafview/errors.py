@@ -1,10 +1,76 @@
-"""Errors shared by the command-line front ends."""
+"""One error hierarchy for leafview.
+
+Every error leafview raises on purpose derives from :class:`LeafviewError`, so a caller can
+catch them all in one place. The command line maps them to exit codes: bad input
+(:class:`ParamError`, :class:`UsageError` and its subclasses) exits 2 and writes nothing; a
+runtime failure (:class:`GLUnavailable`, :class:`ShaderError`, :class:`ImageWriteError`) exits 1.
+
+The subclasses keep the built-in base they always had (``ValueError`` for bad values,
+``RuntimeError`` for failures), so ``except ValueError`` in user code keeps working.
+"""
 
 from __future__ import annotations
 
-__all__ = ["UsageError"]
+__all__ = ["LeafviewError", "ParamError", "UsageError", "ExportError", "NonFiniteMesh", "SceneLimitError",
+           "GLUnavailable", "ShaderError", "ImageWriteError"]
 
 
-class UsageError(Exception):
+class LeafviewError(Exception):
+    """The base of every error leafview raises on purpose."""
+
+
+class ParamError(LeafviewError, ValueError):
+    """Invalid leaf parameters. ``path`` is the dotted field path (``shape.silhouette[1][0]``),
+    ``source`` the file (and ``line:col`` for syntax errors) when known."""
+
+    def __init__(self, path: str, message: str, source: str | None = None) -> None:
+        self.path = path
+        self.message = message
+        self.source = source
+        where = f"{source}: " if source else ""
+        what = f"{path}: " if path else ""
+        super().__init__(f"{where}{what}{message}")
+
+    def with_source(self, source: str) -> ParamError:
+        return ParamError(self.path, self.message, source)
+
+
+class UsageError(LeafviewError):
     """Bad command-line input (arguments, paths, files); ``leafview`` reports it with exit code 2
     and writes nothing."""
+
+
+class ExportError(UsageError):
+    """A leaf or scene that cannot be written in the asked-for format (too large, not finite, an
+    unknown extension); nothing is written."""
+
+
+class NonFiniteMesh(ExportError):
+    """A baked leaf with NaN/Inf vertices or normals (or normals that cannot be repaired); the
+    message names the leaf and the first bad grid sample. Nothing is written."""
+
+
+class SceneLimitError(LeafviewError, ValueError):
+    """A scene that cannot be drawn within this context's limits; the message names the limit."""
+
+
+class GLUnavailable(LeafviewError, RuntimeError):
+    """No usable OpenGL 4.5 context could be created; the message says what to install."""
+
+
+class ShaderError(LeafviewError, RuntimeError):
+    """A GLSL program failed to preprocess, compile or link.
+
+    ``stage`` is "vertex", "fragment", "compute" or "link"; ``location`` is ``file:line``
+    of the first error when the log names one.
+    """
+
+    def __init__(self, stage: str, location: str | None, log: str) -> None:
+        self.stage, self.location, self.log = stage, location, log
+        where = f" at {location}" if location else ""
+        super().__init__(f"{stage} shader{where}:\n{log}" if stage != "link"
+                         else f"program link failed{where}:\n{log}")
+
+
+class ImageWriteError(LeafviewError, RuntimeError):
+    """OpenImageIO could not write the file (the message carries OIIO's own error text)."""

@@ -1,13 +1,10 @@
-"""Public name of the landmark leaf model: ``from leafview.landmarks import fit_margin``.
-
-The implementation lives in :mod:`leafview.model.landmarks` (numpy/scipy only, with the model
-package); this module re-exports its public API unchanged so that user code and the docs use one
-short import path.
-"""
+"""Public name of the landmark leaf model (Garg & Leow 2011, eqs 1-6):
+``from leafview.landmarks import fit_margin``. The implementation is
+:mod:`leafview.botany.landmarks`; this module re-exports its public API unchanged."""
 
 from __future__ import annotations
 
-from .model.landmarks import *  # noqa: F401,F403
-from .model.landmarks import __all__ as _model_all
+from leafview.botany.landmarks import *  # noqa: F403
+from leafview.botany.landmarks import __all__ as _botany_all
 
-__all__ = list(_model_all)
+__all__ = list(_botany_all)

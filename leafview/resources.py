@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 from pathlib import Path
 
 __all__ = ["shader_dir", "asset_dir", "preset_dir", "builtin_presets", "resolve_preset"]
@@ -19,12 +19,12 @@ def _find(name: str) -> Path:
                             "(a broken install? reinstall leafview)")
 
 
-@lru_cache(maxsize=None)
+@cache
 def shader_dir() -> Path:
     return _find("shaders")
 
 
-@lru_cache(maxsize=None)
+@cache
 def asset_dir() -> Path:
     return _find("assets")
 

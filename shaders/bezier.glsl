@@ -1,5 +1,5 @@
 // Bézier curves in Bernstein form (seed 004, eq. 1) and their derivatives.
-// numpy reference: leafview/model/bezier.py
+// numpy reference: leafview/core/bezier.py
 #ifndef LEAFVIEW_BEZIER_GLSL
 #define LEAFVIEW_BEZIER_GLSL
 

@@ -1,5 +1,5 @@
 // fBm helpers shared by the synthesis pass (fbm.comp) and the leaf vertex shader.
-// numpy reference: leafview/model/fbm.py (pcg, hash_uniform, spectrum, sample_periodic).
+// numpy reference: leafview/deform/fbm.py (pcg, hash_uniform, spectrum, sample_periodic).
 #ifndef LEAFVIEW_FBM_GLSL
 #define LEAFVIEW_FBM_GLSL
 

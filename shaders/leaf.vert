@@ -35,7 +35,7 @@ flat out vec3 v_back;
 
 void main() {
     // one half only (shape.half = ±1, e.g. each side of an asymmetric leaf): the grid's u in
-    // [-1, 1] spreads over [0, 1] or [-1, 0], u' = (u + half) / 2 (leafview.model.leaf.drawn_uv)
+    // [-1, 1] spreads over [0, 1] or [-1, 0], u' = (u + half) / 2 (leafview.deform.surface.drawn_uv)
     vec2 uv = in_uv;
 #ifndef LEAF_NO_HALF
     float half_side = LEAF.back.w;

@@ -8,7 +8,7 @@
 // the Leaves storage buffer). Fields are read through it where they are used, never copied as a
 // whole struct: a copy makes the compiler load every field (and on llvmpipe each storage-buffer
 // load is a per-vertex gather). Conventions and the numpy reference:
-// leafview/model/leaf.py (a test compares positions read back from this code with it).
+// leafview/deform/surface.py (a test compares positions read back from this code with it).
 #ifndef LEAFVIEW_LEAF_EVAL_GLSL
 #define LEAFVIEW_LEAF_EVAL_GLSL
 #include "bezier.glsl"
@@ -35,7 +35,7 @@ vec2 tip_taper(float v) {
 
 // Rippled margin (seed 002 eq. 5): D = tau(v) r(v) c(|u|) z, r = P [lambda + (1 - lambda) N(k veins v
 // + theta)], c(s) = s^2 (3 - s) / 2 the small-deflection shape of a tip-loaded cantilever (the
-// secondary vein from the midrib). numpy reference: leafview/model/leaf.py, _add_ripple.
+// secondary vein from the midrib). numpy reference: leafview/deform/surface.py, _add_ripple.
 void add_ripple(float sigma, float s, float v, inout LeafEval e) {
     vec4 rp = sigma > 0.0 ? LEAF.ripple_l : LEAF.ripple_r;  // P, lambda, k, theta
     int base = int(LEAF.deform.w) * RIPPLE_SAMPLES;
@@ -72,7 +72,7 @@ vec4 bend_sample(int i) {
 
 // Midrib bend and twist (seed 002 secs 4, 5.2.2): p' = A + Delta(v) + R(v) (p - A), R = R_N(Phi(v))
 // R_y(alpha v), Delta and Phi Catmull-Rom through the host's bend samples. numpy reference:
-// leafview/model/leaf.py, _bend, and leafview/model/beam.py, sample_clamped.
+// leafview/deform/surface.py, _bend, and leafview/deform/beam.py, sample_clamped.
 void apply_bend(float v, vec3 Av, vec3 dAv, inout LeafEval e) {
     float t = clamp(v, 0.0, 1.0) * float(BEND_SAMPLES - 1);
     int i = min(int(floor(t)), BEND_SAMPLES - 2);
@@ -100,7 +100,7 @@ void apply_bend(float v, vec3 Av, vec3 dAv, inout LeafEval e) {
     e.Luv = Luv;
 }
 
-// Extended silhouette (leafview/model/params.py): N rows, S, F and G of degree n = N + 1, rows
+// Extended silhouette (leafview/core/params.py): N rows, S, F and G of degree n = N + 1, rows
 // possibly tilted. Same rearrangement as below with degree-n Bernstein weights, plus the tilt
 // curve T(v) = sum_i w_i T_i (T_i = -x̄s_i sin φ_i t(v̄_i), side-independent), which the cubic
 // cross-section's linear precision turns into + |u| T(v). Rows 1-3 are read from axis/heights,
@@ -145,7 +145,7 @@ void ext_silhouette(int rows, float v, out vec3 Pv, out vec3 Qv, out vec3 dPv, o
     }
 }
 
-// Evaluation strategy (exactly eqs 3-6, rearranged; the numpy reference in leafview/model/leaf.py
+// Evaluation strategy (exactly eqs 3-6, rearranged; the numpy reference in leafview/deform/surface.py
 // implements the equations literally and the readback test compares the two):
 // S, F and G for side sigma share the axis points A(v̄_i) and differ only in the fraction of
 // x̄_i n(v̄_i) (1, 1/3, 2/3) and in their heights. With P the quartic through (0, A(v̄_1..3), apex),
@@ -264,7 +264,7 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
 }
 
 // Upper-side unit normal normalize(Lv x Lu); at the pinched base/apex Lu vanishes and its limit
-// direction +-Luv is used instead (leafview/model/leaf.py, _normal_from).
+// direction +-Luv is used instead (leafview/deform/surface.py, _normal_from).
 vec3 leaf_normal(LeafEval e, float v) {
     vec3 lu = v <= 0.0 ? e.Luv : (v >= 1.0 ? -e.Luv : e.Lu);
     vec3 n = cross(e.Lv, lu);

@@ -2,7 +2,7 @@
 // Per-leaf constants of eqs 3-4, computed once per leaf instead of once per vertex: the axis
 // points A(v̄_i) and the scaled in-plane normals x̄s_i n(v̄_i) (eq. 2). The vertex shader reads
 // them from the same LeafData row, packed with the heights z̄f, z̄g, z̄s so that it reads six vec4s
-// per vertex (see layout.py). numpy reference: leafview/model/leaf.py, axis_frames().
+// per vertex (see layout.py). numpy reference: leafview/deform/surface.py, axis_frames().
 // Extended silhouettes (tilt.w = N > 0): rows may be tilted by φ_i, so the normal part is
 // x̄s_i cos φ_i n(v̄_i) and a side-independent offset -x̄s_i sin φ_i t(v̄_i) (t the unit axis
 // tangent) goes to sil_tilt; rows 4..N go to sil_axis / sil_heights. numpy reference:

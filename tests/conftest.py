@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import leafview
-from leafview.model.params import LeafParams
+from leafview.core.params import LeafParams
 from leafview.resources import builtin_presets
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -45,7 +45,7 @@ def compare(actual: np.ndarray, reference: np.ndarray) -> tuple[float, int]:
 def assert_matches_reference(actual: np.ndarray, stem: str, request: pytest.FixtureRequest) -> None:
     """Compare ``actual`` with ``tests/images/<stem>.png`` (regenerated with ``--regen-images``);
     on failure the actual image and a ×8 diff go to ``tests/_failures``."""
-    from leafview.imaging import read_image, write_image
+    from leafview.export.images import read_image, write_image
 
     ref_path = IMAGES / f"{stem}.png"
     if request.config.getoption("--regen-images"):
@@ -125,7 +125,7 @@ def random_params(rng: np.random.Generator, *, jitter: bool = False) -> LeafPara
     omega = np.r_[a1, a2, np.ravel(rows), rng.uniform(-0.15, 0.15, 6)]
     params = LeafParams.from_vector(omega)
     if jitter:
-        from leafview.model.params import Jitter
+        from leafview.core.params import Jitter
 
         params = params.replace(jitter=Jitter(enabled=True, amplitude=rng.uniform(0.005, 0.08),
                                               density=rng.uniform(3, 90), seed=int(rng.integers(0, 1000))))

@@ -8,12 +8,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from leafview.model.asymmetric import LEFT_HALF, RIGHT_HALF, shader_leaves
-from leafview.model.landmarks import outline, outline_sides
-from leafview.model.leaf import evaluate
-from leafview.model.outline_fit import hausdorff
-from leafview.model.params import LeafParams, ParamError
-from leafview.model.shapes import combine_sides, landmark_leaf, random_instance
+from leafview.botany.asymmetric import LEFT_HALF, RIGHT_HALF, shader_leaves
+from leafview.botany.catalogue import combine_sides, landmark_leaf, random_instance
+from leafview.botany.landmarks import outline, outline_sides
+from leafview.botany.outline_fit import hausdorff
+from leafview.core.params import LeafParams, ParamError
+from leafview.deform.surface import evaluate
 
 
 def _drawn_margin(params: LeafParams, n: int = 801) -> np.ndarray:
@@ -32,7 +32,7 @@ def test_each_side_follows_its_own_margin():
     assert max(d_right, d_left) <= 0.01
     assert fit.error == pytest.approx(max(fit.side_errors))
     # the mean-of-sides symmetric fit (what one leaf can do) misses by far more
-    from leafview.model.outline_fit import fit_outline
+    from leafview.botany.outline_fit import fit_outline
 
     sym = fit_outline(outline(leaf, 256))
     assert sym.error > 3 * fit.error
@@ -72,7 +72,7 @@ def test_rendered_asymmetric_leaf_is_its_outline_without_a_crack(gl):
     from matplotlib.path import Path as MplPath
     from scipy import ndimage
 
-    from leafview.shapes.render import render_leaves
+    from leafview.gpu.sheets import render_leaves
 
     leaf = combine_sides("ovate", "obovate", name="fig6")
     fit = shader_leaves(leaf)

@@ -1,20 +1,20 @@
-"""The batched landmark-leaf fit (leafview.model.batch_fit) and leafview.shapes.instances."""
+"""The batched landmark-leaf fit (leafview.botany.batch_fit) and leafview.shapes.instances."""
 
 import numpy as np
 import pytest
 
-from leafview.model import batch_fit as bf
-from leafview.model.bezier import bernstein
-from leafview.model.landmarks import outline
-from leafview.model.outline_fit import (
+from leafview.botany import batch_fit as bf
+from leafview.botany.catalogue import catalogue_names, landmark_leaf, random_instance
+from leafview.botany.landmarks import outline
+from leafview.botany.outline_fit import (
     _jacobian_grid,
     fit_outline,
     fit_side,
     outline_error,
     split_outline,
 )
-from leafview.model.params import LeafParams, ParamError
-from leafview.model.shapes import catalogue_names, landmark_leaf, random_instance
+from leafview.core.bezier import bernstein
+from leafview.core.params import LeafParams, ParamError
 from leafview.shapes import instances
 
 MIXED = ("ovate", "cordate", "obovate-convex-concave", "elliptic-extended-extended", "lanceolate", "reniform")
@@ -69,7 +69,7 @@ def test_batched_error_matches_outline_error():
 
 
 def test_controls_from_params_is_what_the_model_draws():
-    from leafview.model.leaf import control_polygons
+    from leafview.deform.surface import control_polygons
 
     res = bf.fit_outlines(_rings(("cordate", "obcordate"))[1], fallback=False)
     for p, c in zip(res.params, bf.controls_from_params(res.params)):

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from leafview.model import LeafParams, evaluate, normals
-from leafview.model.beam import bend_profile, residual, sample_clamped, solve_bending
-from leafview.model.params import Bending, ParamError, parse_params
+from leafview.core.params import Bending, LeafParams, ParamError, parse_params
+from leafview.deform.beam import bend_profile, residual, sample_clamped, solve_bending
+from leafview.deform.surface import evaluate, normals
 from tests.conftest import random_params
 
 
@@ -56,7 +56,7 @@ def test_droop_grows_with_load_and_shrinks_with_stiffness():
 
 
 def test_load_direction_is_in_world_space():
-    from leafview.model.params import Transform
+    from leafview.core.params import Transform
 
     p = LeafParams.load("assets/presets/lanceolate.toml").replace(bending=Bending(load=10))
     tip = evaluate(p, 0.0, 1.0)[0]

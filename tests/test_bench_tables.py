@@ -11,7 +11,7 @@ import pytest
 @pytest.mark.gl
 @pytest.mark.slow
 def test_scene_bench_quick_run_fills_the_table(gl):
-    from leafview.scene_bench import format_table, run
+    from leafview.bench.scene import format_table, run
 
     res = run(quick=True, ctx=gl.ctx)
     assert res["gl_renderer"] == gl.ctx.info["GL_RENDERER"]
@@ -30,7 +30,7 @@ def test_scene_bench_quick_run_fills_the_table(gl):
 @pytest.mark.gl
 @pytest.mark.slow
 def test_shapes_bench_quick_run_fills_the_table(gl):
-    from leafview.shapes.bench import format_table, run
+    from leafview.bench.shapes import format_table, run
 
     res = run(quick=True, ctx=gl.ctx)
     table = format_table(res)

@@ -9,9 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from leafview.camera import frame_view
+from leafview.deform.surface import jitter_table, tessellate
 from leafview.gpu.layout import LEAF_BLOCK, pack_leaf
-from leafview.model.leaf import jitter_table, tessellate
+from leafview.scene.camera import frame_view
 
 NUMERIC_KEYS = (
     "thumbnails_per_s", "matplotlib_thumbnails_per_s", "thumbnail_speedup",
@@ -152,7 +152,7 @@ def test_too_many_leaves_for_the_storage_buffer(gl):
 
 @pytest.mark.gl
 def test_quick_run_reports_every_key(gl):
-    from leafview.benchmarks import format_table, run
+    from leafview.bench.core import format_table, run
 
     # share the session context: a second standalone context would become current behind it
     res = run(quick=True, ctx=gl.ctx)

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from leafview.model.bezier import bernstein, bernstein_matrix, derivative_points, evaluate_curve
+from leafview.core.bezier import bernstein, bernstein_matrix, derivative_points, evaluate_curve
 
 
 def test_cubic_matrix_is_the_one_of_eq_6():

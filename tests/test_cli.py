@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from leafview.cli import main
-from leafview.imaging import PARAMS_ATTRIBUTE, read_image
-from leafview.model.params import LeafParams
+from leafview.core.params import LeafParams
+from leafview.export.images import PARAMS_ATTRIBUTE, read_image
 from leafview.resources import builtin_presets
 
 pytestmark = pytest.mark.gl
@@ -159,7 +159,7 @@ def test_gl_unavailable_is_a_message_not_a_traceback(tmp_path):
 
 def test_png_round_trip_keeps_straight_alpha(gl, tmp_path):
     """Partially covered edge pixels read back exactly as written (no premultiplication)."""
-    from leafview.imaging import write_image
+    from leafview.export.images import write_image
 
     img = gl.render(LeafParams.load(ROOT / "assets/presets/maize.toml"), (96, 96), "side")
     partial = (img[..., 3] > 0) & (img[..., 3] < 255)

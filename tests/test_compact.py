@@ -1,4 +1,4 @@
-"""The compact parametric form (leafview.model.compact): exact round trips over presets, catalogue
+"""The compact parametric form (leafview.core.compact): exact round trips over presets, catalogue
 shapes, extended and one-sided leaves and random parameters; sizes; rounding; errors that name
 the Ω entry; leaf sets; compact species in scene files; Transform.from_matrix; the CLI."""
 
@@ -10,13 +10,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tests.conftest import random_params
 
 from leafview.cli import main
-from leafview.model import compact as C
-from leafview.model.io import load_leaves, save_leaves
-from leafview.model.params import Bending, Jitter, LeafParams, ParamError, Ripple, Transform
+from leafview.core import compact as C
+from leafview.core.io import load_leaves, save_leaves
+from leafview.core.params import Bending, Jitter, LeafParams, ParamError, Ripple, Transform
 from leafview.resources import builtin_presets
+from tests.conftest import random_params
 
 
 def _presets() -> dict[str, LeafParams]:
@@ -195,7 +195,7 @@ def test_transform_from_matrix_inverts_matrix():
 
 
 def test_scene_species_are_written_compact_and_old_tables_still_load(tmp_path):
-    from leafview.model.scene import SceneSpec, load_scene, save_scene
+    from leafview.scene.spec import SceneSpec, load_scene, save_scene
 
     presets = _presets()
     spec = SceneSpec(species=(presets["beech"].replace(transform=Transform()), presets["maize"]
@@ -232,7 +232,7 @@ def test_cli_writes_compact_files_and_a_scene_as_a_placed_leaf_set(tmp_path, cap
     assert main(["export", "ovate", "-o", str(tmp_path / "o.glb"), "--digits", "5"]) == 2
     assert not (tmp_path / "two.leaf.json").exists() and not (tmp_path / "o.glb").exists()
 
-    from leafview.model.scene import SceneSpec, build_scene, save_scene
+    from leafview.scene.spec import SceneSpec, build_scene, save_scene
 
     presets = _presets()
     spec = SceneSpec(species=(presets["beech"], presets["ovate"]), layout="plant", leaves=120, seed=3)
@@ -252,7 +252,7 @@ def test_cli_writes_compact_files_and_a_scene_as_a_placed_leaf_set(tmp_path, cap
 
 @pytest.mark.gl
 def test_rendering_a_compact_file_matches_the_preset(tmp_path, gl):
-    from leafview.imaging import read_image
+    from leafview.export.images import read_image
 
     compact = tmp_path / "holly.leaf.json"
     LeafParams.load(builtin_presets()["holly"]).save(compact)
@@ -270,7 +270,7 @@ def test_rendering_a_compact_file_matches_the_preset(tmp_path, gl):
 def test_docs_reader_runs(tmp_path):
     """docs/parametric.md's plain-Python reader (json + math only) evaluates a compact file to the
     same midrib and margin as leafview's reference."""
-    from leafview.model.leaf import evaluate
+    from leafview.deform.surface import evaluate
 
     text = (Path(__file__).resolve().parents[1] / "docs" / "parametric.md").read_text(encoding="utf-8")
     code = text.split("```python\n", 1)[1].split("```", 1)[0]
@@ -293,8 +293,8 @@ def test_a_scene_saved_as_a_leaf_set_draws_the_same_leaves(tmp_path, gl):
     """``leafview scene R --save S.leaves.json`` then ``leafview scene S.leaves.json`` draws what
     the recipe draws (no stems, finest level, no culling: the only difference is float32
     rounding of the varied Ω, done on the host instead of in the shader)."""
-    from leafview.imaging import read_image
-    from leafview.model.scene import SceneSpec, save_scene
+    from leafview.export.images import read_image
+    from leafview.scene.spec import SceneSpec, save_scene
 
     presets = _presets()
     spec = SceneSpec(species=(presets["beech"], presets["ovate"]), layout="plant", leaves=150, seed=5, stems=False)

@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from leafview.model import LeafParams, ParamError, evaluate
-from leafview.model.edits import curve_axis, curve_longitudinal, scale_width, set_silhouette_point, skew_axis
+from leafview.core.edits import curve_axis, curve_longitudinal, scale_width, set_silhouette_point, skew_axis
+from leafview.core.params import LeafParams, ParamError
+from leafview.deform.surface import evaluate
 
 
 def test_scale_width_scales_lateral_extent():

@@ -10,18 +10,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
-from tests.conftest import require_or_skip
+from support.gltf_read import read_gltf
+from support.validate import ValidatorMissing, gltf_report, usd_errors
 
 import leafview
 from leafview.cli import main
+from leafview.core.params import Transform
+from leafview.deform.surface import grid_indices
 from leafview.errors import UsageError
 from leafview.export import bake, export_leaf, format_of
-from leafview.export.gltf_read import read_gltf
 from leafview.export.mesh import LeafMesh, NonFiniteMesh, pinch_triangles
 from leafview.export.objply import axis_matrix
-from leafview.export.validate import ValidatorMissing, gltf_report, usd_errors
-from leafview.model.leaf import grid_indices
-from leafview.model.params import Transform
+from tests.conftest import require_or_skip
 
 # presets covering plain, jitter, ripples and bending
 SAMPLE = ("ovate", "serrate", "maize", "willow")

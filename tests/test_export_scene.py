@@ -8,11 +8,13 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 import trimesh
+from support.gltf_read import read_gltf
+from support.validate import usd_errors
 from test_export import assert_gltf_clean
 
+from leafview.core.params import LeafParams, Transform
 from leafview.errors import UsageError
 from leafview.export import export_scene
-from leafview.export.gltf_read import read_gltf
 from leafview.export.mesh import bake
 from leafview.export.objply import axis_matrix
 from leafview.export.scene import (
@@ -21,8 +23,6 @@ from leafview.export.scene import (
     decompose_trs,
     quat_from_matrix,
 )
-from leafview.export.validate import usd_errors
-from leafview.model.params import LeafParams, Transform
 
 GRID = (9, 17)
 LENGTH = 0.1
@@ -30,7 +30,7 @@ LENGTH = 0.1
 
 @dataclass
 class StandInScene:
-    """The duck-typed scene interface of leafview.model.scene.Scene, filled by hand."""
+    """The duck-typed scene interface of leafview.scene.spec.Scene, filled by hand."""
 
     species: list[LeafParams]
     shape_ids: np.ndarray
@@ -233,7 +233,7 @@ def test_usd_half_precision_orientations_agree(gl, scene, tmp_path):
 def test_export_bench_quick_reports_sizes_and_renderer(gl):
     import json
 
-    from leafview.export.bench import format_table, run
+    from leafview.bench.export import format_table, run
 
     res = run(quick=True)
     assert res["gl_renderer"] and res["leaves"] > 0

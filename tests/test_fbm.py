@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from leafview.model.fbm import fbm_noise, hash_uniform, pcg, resample, sample_periodic, spectrum
+from leafview import fbm_noise
+from leafview.deform.fbm import hash_uniform, pcg, resample, sample_periodic, spectrum
 
 
 @pytest.mark.parametrize("beta", [1.0, 2.0, 3.0])
@@ -87,8 +88,8 @@ def test_gpu_signal_equals_cpu(gl):
 
 @pytest.mark.gl
 def test_ripple_pass_is_batched_and_recomputes_only_changed_rows(gl):
+    from leafview.deform.fbm import RIPPLE_SAMPLES
     from leafview.gpu.ripple import RipplePass
-    from leafview.model.fbm import RIPPLE_SAMPLES
 
     rp = RipplePass(gl.ctx)
     try:

@@ -1,6 +1,6 @@
 """The glTF extensions leafview writes, checked independently of the writer and of the Khronos
 validator (which skips them): official JSON schemas plus the extension specifications' rules
-(leafview.export.extensions), on real exports and on targeted breakages; and the instance TRS
+(support.gltf_extensions), on real exports and on targeted breakages; and the instance TRS
 of an EXT_mesh_gpu_instancing scene recomposed with our own quaternion formula."""
 
 from __future__ import annotations
@@ -14,18 +14,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_export import gltf_validate
-from test_export_scene import StandInScene
-
-from leafview.export import export_leaf, export_scene
-from leafview.export.extensions import (
+from support.gltf_extensions import (
     CHECKED_EXTENSIONS,
     SCHEMA_DIR,
     check_extensions,
     check_file,
     read_container,
 )
-from leafview.model.params import LeafParams, Transform
+from test_export import gltf_validate
+from test_export_scene import StandInScene
+
+from leafview.core.params import LeafParams, Transform
+from leafview.export import export_leaf, export_scene
 
 GRID = (5, 9)
 LENGTH = 0.1
@@ -338,7 +338,7 @@ def test_instances_recompose_to_the_scene_matrices(scene, scene_file):
 
 
 def test_command_line_exit_codes(scene_glb, scene_file, tmp_path, capsys):
-    from leafview.export.extensions import main
+    from support.gltf_extensions import main
 
     doc, blob = copy.deepcopy(scene_file[0]), bytearray(scene_file[1])
     pointer, words = _wrong_rotation_type(doc, blob)

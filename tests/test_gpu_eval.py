@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import leafview
+from leafview.core.params import Jitter
+from leafview.deform.surface import grid_uv
 from leafview.gpu.layout import FRAME_BLOCK, LEAF_BLOCK, pack_leaf
-from leafview.model.leaf import grid_uv
-from leafview.model.params import Jitter
 from tests.conftest import random_params, run_prepare
 
 pytestmark = pytest.mark.gl
@@ -43,11 +43,11 @@ def test_readback_on_the_render_grid_and_normals(gl, presets):
 @pytest.mark.parametrize("half", [-1, 1])
 def test_one_sided_leaf_spreads_the_grid_over_its_half(gl, presets, half):
     """shape.half = ±1 (the sides of an asymmetric leaf): the shader evaluates the surface at
-    drawn_uv of the grid, the reference of leafview.model.leaf; positions, normals and the
+    drawn_uv of the grid, the reference of leafview.deform.surface; positions, normals and the
     tessellated mesh agree, and every vertex lies on the chosen half."""
     from dataclasses import replace
 
-    from leafview.model.leaf import drawn_uv, tessellate
+    from leafview.deform.surface import drawn_uv, tessellate
 
     uv = grid_uv(33, 65)
     for name in ("ovate", "asymmetric", "maize", "serrate"):
@@ -135,8 +135,8 @@ def test_every_member_offset_matches_std140_and_std430(gl, tmp_path):
 
 def test_prepare_pass_matches_reference(gl):
     """leaf_prepare.comp writes A(v̄_i), x̄s_i n(v̄_i) (eqs 2-4) and the heights into each row."""
+    from leafview.deform.surface import axis_frames
     from leafview.gpu.layout import pack_leaves
-    from leafview.model.leaf import axis_frames
 
     rng = np.random.default_rng(21)
     leaves = [random_params(rng) for _ in range(70)]  # more than one 64-wide work group
@@ -195,7 +195,6 @@ def test_shader_permutations_match_the_full_program(gl, presets):
     import moderngl
 
     from leafview.gpu.layout import feature_defines, pack_leaf
-
     from leafview.shapes import shapes_params
 
     plain = {"LEAF_NO_EXTENDED", "LEAF_NO_HALF"}
@@ -209,7 +208,7 @@ def test_shader_permutations_match_the_full_program(gl, presets):
     assert "LEAF_NO_HALF" not in feature_defines(pack_leaf(one_side))
     leaves = {**presets, "extended": extended, "one side": one_side,
               "extended, one side": extended.replace(shape=dataclasses.replace(extended.shape, half=1))}
-    uv = leafview.model.grid_uv(9, 15)
+    uv = leafview.deform.surface.grid_uv(9, 15)
     vbo = gl.ctx.buffer(uv.tobytes())
     try:
         for name, leaf in leaves.items():

@@ -26,7 +26,7 @@ def test_reference_image(gl, presets, request, name, view):
 
 def test_compare_detects_a_changed_leaf(gl, presets):
     """The tolerance is tight enough to catch a small shape edit (guards against a vacuous test)."""
-    from leafview.model.edits import scale_width
+    from leafview.core.edits import scale_width
 
     a = gl.render(presets["ovate"], (SIZE, SIZE), "top")
     b = gl.render(scale_width(presets["ovate"], 1.04), (SIZE, SIZE), "top")

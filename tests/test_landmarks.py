@@ -10,7 +10,8 @@ import sys
 import numpy as np
 import pytest
 
-from leafview.model.landmarks import (
+from leafview.botany.catalogue import catalogue, landmark_leaf
+from leafview.botany.landmarks import (
     LandmarkLeaf,
     SideLandmarks,
     chord_parameters,
@@ -21,8 +22,7 @@ from leafview.model.landmarks import (
     outline_sides,
     side_fit,
 )
-from leafview.model.params import ParamError
-from leafview.model.shapes import catalogue, landmark_leaf
+from leafview.core.params import ParamError
 
 
 def _angle_between(a: np.ndarray, b: np.ndarray) -> float:
@@ -233,7 +233,7 @@ def test_asymmetric_outline_uses_each_side():
 
 
 def test_landmark_modules_never_import_gl():
-    code = ("import sys, leafview.model.hermite, leafview.model.landmarks, leafview.model.shapes, leafview.model.morph; "
+    code = ("import sys, leafview.botany.hermite, leafview.botany.landmarks, leafview.botany.catalogue, leafview.botany.morph; "
             "bad = [m for m in ('moderngl', 'glfw', 'imgui_bundle', 'glcontext') if m in sys.modules]; "
             "print(bad); sys.exit(1 if bad else 0)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)

@@ -7,7 +7,7 @@ import moderngl
 import numpy as np
 import pytest
 
-from leafview.model.params import Jitter
+from leafview.core.params import Jitter
 
 pytestmark = [pytest.mark.gl, pytest.mark.slow]
 

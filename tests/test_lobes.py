@@ -5,10 +5,19 @@ import dataclasses
 import numpy as np
 import pytest
 
-from leafview.model.lobes import (Z_STEP, LobedLeaf, load_lobed_leaf, lobe_leaves, lobe_outlines, lobed_from_dict,
-                                  place_lobes, scale_width_exact, valleys)
-from leafview.model.leaf import control_polygons
-from leafview.model.params import Material, ParamError
+from leafview.botany.lobes import (
+    Z_STEP,
+    LobedLeaf,
+    load_lobed_leaf,
+    lobe_leaves,
+    lobe_outlines,
+    lobed_from_dict,
+    place_lobes,
+    scale_width_exact,
+    valleys,
+)
+from leafview.core.params import Material, ParamError
+from leafview.deform.surface import control_polygons
 from leafview.shapes import shapes_params
 
 
@@ -100,7 +109,7 @@ def _mask_and_union(leaf, size, gl):
     way (the top view frames the drawn vertices' xy box into 90 % of the image)."""
     from matplotlib.path import Path as MplPath
 
-    from leafview.shapes.render import render_leaves
+    from leafview.gpu.sheets import render_leaves
 
     leaves = lobe_leaves(leaf)
     img = render_leaves(leaves, (size, size), "top", flat=True, renderer=gl)
@@ -140,7 +149,7 @@ def test_overlaps_resolve_by_the_z_order_not_by_z_fighting(gl):
     base = lobe_leaves(maple)
     leaves = [p.replace(material=Material(front=tuple(c), back=tuple(c))) for p, c in zip(base, colours)]
 
-    from leafview.shapes.render import render_leaves
+    from leafview.gpu.sheets import render_leaves
 
     img = render_leaves(leaves, (160, 160), "top", flat=True, renderer=gl)
     _, inside = _mask_and_union(maple, 160, gl)

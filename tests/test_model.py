@@ -7,10 +7,9 @@ import sys
 import numpy as np
 import pytest
 
-from leafview.model import LeafParams, evaluate, normals, partials, tessellate
-from leafview.model.bezier import derivative_points, evaluate_curve
-from leafview.model.leaf import grid_indices, grid_uv, jitter_table
-from leafview.model.params import Jitter
+from leafview.core.bezier import derivative_points, evaluate_curve
+from leafview.core.params import Jitter, LeafParams
+from leafview.deform.surface import evaluate, grid_indices, grid_uv, jitter_table, normals, partials, tessellate
 from tests.conftest import random_params
 
 
@@ -156,7 +155,7 @@ def test_evaluate_rejects_out_of_domain():
 
 
 def test_model_never_imports_gl():
-    code = ("import sys, leafview, leafview.model, leafview.model.edits, leafview.model.io; "
+    code = ("import sys, leafview, leafview.core, leafview.deform.surface, leafview.botany.shapes, leafview.scene.spec, leafview.core.edits, leafview.core.io, leafview.landmarks, leafview.shapes; "
             "bad = [m for m in ('moderngl', 'glfw', 'imgui_bundle', 'glcontext') if m in sys.modules]; "
             "print(bad); sys.exit(1 if bad else 0)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
@@ -164,7 +163,7 @@ def test_model_never_imports_gl():
 
 
 def test_control_polygons_are_the_curves_control_points():
-    from leafview.model.leaf import control_polygons
+    from leafview.deform.surface import control_polygons
 
     rng = np.random.default_rng(8)
     p = random_params(rng)
@@ -179,7 +178,7 @@ def test_control_polygons_are_the_curves_control_points():
 
 
 def _frac_points(p, frac, z):
-    from leafview.model.leaf import axis_frames
+    from leafview.deform.surface import axis_frames
 
     a, q = axis_frames(p)
     return a + frac * q + np.c_[np.zeros(3), np.zeros(3), z]

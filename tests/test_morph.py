@@ -9,8 +9,9 @@ import math
 import numpy as np
 import pytest
 
-from leafview.model.landmarks import side_fit
-from leafview.model.morph import (
+from leafview.botany.catalogue import catalogue, landmark_leaf, outline
+from leafview.botany.landmarks import side_fit
+from leafview.botany.morph import (
     LeafSpace,
     insertion_error,
     keyframe_path,
@@ -22,8 +23,7 @@ from leafview.model.morph import (
     smoothness,
     unify,
 )
-from leafview.model.params import ParamError
-from leafview.model.shapes import catalogue, landmark_leaf, outline
+from leafview.core.params import ParamError
 
 
 def test_vector_round_trip_and_dimensions():

@@ -8,18 +8,18 @@ import json
 import numpy as np
 import pytest
 
+from leafview.botany.catalogue import landmark_leaf, load_landmark_leaf
+from leafview.botany.morph import keyframe_path, leaf_vector, morph_path, smoothness
 from leafview.cli import main
-from leafview.imaging import PARAMS_ATTRIBUTE, read_image
-from leafview.model.morph import keyframe_path, leaf_vector, morph_path, smoothness
-from leafview.model.params import LeafParams, ParamError
-from leafview.model.shapes import landmark_leaf, load_landmark_leaf
+from leafview.core.params import LeafParams, ParamError
+from leafview.export.images import PARAMS_ATTRIBUTE, read_image
+from leafview.gpu.morph import RefSpec, load_morph_leaf, morph_sequence, parse_ref, shared_camera
 from leafview.resources import asset_dir
-from leafview.shapes.morph import RefSpec, load_morph_leaf, morph_sequence, parse_ref, shared_camera
 
 
 def test_public_names_from_the_issue():
+    import leafview.botany.landmarks as model_lm
     import leafview.landmarks as lm
-    import leafview.model.landmarks as model_lm
     from leafview.shapes import catalogue
 
     assert lm.fit_margin is model_lm.fit_margin and set(lm.__all__) == set(model_lm.__all__)
@@ -66,7 +66,7 @@ def test_sequence_ends_are_the_shapes_and_fits_are_close():
 
 
 def test_shared_camera_frames_the_union_of_all_frames():
-    from leafview.camera import frame_view
+    from leafview.scene.camera import frame_view
     from leafview.shapes import shapes_params
 
     small, wide = shapes_params("linear"), shapes_params("reniform")
@@ -134,7 +134,7 @@ def state(presets):
 
 def test_controller_changes_only_the_shape_and_hits_the_ends(state):
     from leafview.app.morph_panel import MorphController
-    from leafview.shapes.morph import fit_frame
+    from leafview.gpu.morph import fit_frame
 
     before = state.params
     c = MorphController(state, source="lanceolate", target="cordate")
@@ -149,9 +149,8 @@ def test_controller_changes_only_the_shape_and_hits_the_ends(state):
 
 
 def test_panel_t_slider_drag_is_one_undo_step(state):
-    from tests.test_viewer_panel import UI
-
     from leafview.app.morph_panel import MorphPanel
+    from tests.test_viewer_panel import UI
 
     ui = UI()
     try:
@@ -174,8 +173,8 @@ def test_panel_t_slider_drag_is_one_undo_step(state):
 
 
 def test_asymmetric_frames_are_two_one_sided_leaves_joined_at_the_midrib():
-    from leafview.model.asymmetric import LEFT_HALF, RIGHT_HALF
-    from leafview.model.leaf import evaluate
+    from leafview.botany.asymmetric import LEFT_HALF, RIGHT_HALF
+    from leafview.deform.surface import evaluate
 
     src = load_landmark_leaf(str(asset_dir() / "landmarks" / "asymmetric.toml"))
     seq = morph_sequence(src, landmark_leaf("elliptic"), [], 3)

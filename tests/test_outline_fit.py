@@ -1,4 +1,4 @@
-"""Ω fitted to catalogue outlines (leafview.model.outline_fit), the extended silhouette (more rows,
+"""Ω fitted to catalogue outlines (leafview.botany.outline_fit), the extended silhouette (more rows,
 tilted rows) in the numpy reference and in the shader, and the precomputed fits in assets/shapes."""
 
 import json
@@ -7,12 +7,19 @@ import numpy as np
 import pytest
 
 import leafview
+from leafview.botany.catalogue import catalogue, landmark_leaf, outline, outline_sides
+from leafview.botany.outline_fit import (
+    fit_outline,
+    hausdorff,
+    jacobian_min,
+    margin,
+    outline_error,
+    rows_from_controls,
+    split_outline,
+)
+from leafview.core.params import MAX_SILHOUETTE_ROWS, LeafParams, ParamError, Shape, parse_params
+from leafview.deform.surface import axis_frames, control_polygons, grid_uv, tilt_offsets
 from leafview.gpu.layout import pack_leaf, pack_leaves
-from leafview.model.leaf import axis_frames, control_polygons, grid_uv, tilt_offsets
-from leafview.model.outline_fit import (fit_outline, hausdorff, jacobian_min, margin, outline_error,
-                                        rows_from_controls, split_outline)
-from leafview.model.params import MAX_SILHOUETTE_ROWS, LeafParams, ParamError, Shape, parse_params
-from leafview.model.shapes import catalogue, landmark_leaf, outline, outline_sides
 from leafview.shapes import fit_info, shape_names, shapes_dir, shapes_params
 from tests.conftest import run_prepare
 
@@ -38,7 +45,7 @@ def test_tilted_row_control_point_follows_eq3_with_tilt():
     p = _extended(rng, 5)
     sh = p.shape
     pa = sh.axis_points()
-    from leafview.model.bezier import derivative_points, evaluate_curve
+    from leafview.core.bezier import derivative_points, evaluate_curve
 
     a = evaluate_curve(pa, sh.vbar)
     d = evaluate_curve(derivative_points(pa), sh.vbar)

@@ -7,8 +7,7 @@ import re
 import numpy as np
 import pytest
 
-from leafview.model.params import (OMEGA_SIZE, SCHEMA_VERSION, Jitter, LeafParams, ParamError, field_specs,
-                                   parse_params)
+from leafview.core.params import OMEGA_SIZE, SCHEMA_VERSION, Jitter, LeafParams, ParamError, field_specs, parse_params
 from tests.conftest import random_params
 
 
@@ -164,7 +163,7 @@ def test_jitter_defaults_are_valid_and_off():
 
 
 def test_transform_matrix():
-    from leafview.model.params import Transform
+    from leafview.core.params import Transform
 
     m = Transform(translation=(1, 2, 3), rotation=(0, 0, 90), scale=2).matrix()
     np.testing.assert_allclose(m @ [1, 0, 0, 1], [1, 4, 3, 1], atol=1e-12)

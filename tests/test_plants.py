@@ -1,4 +1,4 @@
-"""Plant and scatter generators (leafview.model.plants, leafview.model.stems): counts,
+"""Plant and scatter generators (leafview.scene.plants, leafview.scene.stems): counts,
 determinism, proper leaf matrices, petiole attachment, phyllotaxis, size falloff, light facing,
 ground clearance, layouts, stem meshes and input errors."""
 
@@ -9,10 +9,20 @@ import math
 import numpy as np
 import pytest
 
-from leafview.model.params import ParamError
-from leafview.model.plants import (LEAF_BOX, PETIOLE_LIMIT, PETIOLE_SIDES, PHYLLOTAXIS, Placement, PlantSpec,
-                                   auto_twigs, divergence, grow_plant, scatter)
-from leafview.model.stems import soft_floor, transport_frames
+from leafview.core.params import ParamError
+from leafview.scene.plants import (
+    LEAF_BOX,
+    PETIOLE_LIMIT,
+    PETIOLE_SIDES,
+    PHYLLOTAXIS,
+    Placement,
+    PlantSpec,
+    auto_twigs,
+    divergence,
+    grow_plant,
+    scatter,
+)
+from leafview.scene.stems import soft_floor, transport_frames
 
 LIGHT = np.array([0.3, -0.4, 1.0]) / np.linalg.norm([0.3, -0.4, 1.0])
 

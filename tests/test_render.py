@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 import leafview
-from leafview.model.leaf import grid_uv
-from leafview.model.params import Transform
+from leafview.core.params import Transform
+from leafview.deform.surface import grid_uv
 
 pytestmark = pytest.mark.gl
 
@@ -124,8 +124,8 @@ def test_render_many_equals_one_at_a_time(gl, presets):
     """The batched atlas path gives each leaf the image of a single render (up to interpolation
     rounding from the tile's viewport offset), also with different jitter seeds and with batches
     that span several chunks."""
+    from leafview.core.params import Jitter
     from leafview.gpu import renderer as renderer_module
-    from leafview.model.params import Jitter
 
     leaves = list(presets.values())
     leaves += [presets["ovate"].replace(jitter=Jitter(enabled=True, seed=s, amplitude=0.04)) for s in (1, 2, 3)]
@@ -152,7 +152,7 @@ def _same(a, b, what):
 
 def test_interactive_draw_into_a_bound_framebuffer(gl, presets):
     """set_leaf + set_camera + draw(): the viewer's per-frame path, with wireframe."""
-    from leafview.camera import frame_view
+    from leafview.scene.camera import frame_view
 
     fbo = gl.ctx.simple_framebuffer((64, 64))
     try:

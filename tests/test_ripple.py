@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 import leafview
+from leafview.core.params import Bending, Jitter, Ripple
 from leafview.gpu.layout import LEAF_BLOCK, pack_leaves, ripple_keys
-from leafview.model.params import Bending, Jitter, Ripple
 from tests.conftest import random_params
 
 pytestmark = pytest.mark.gl
@@ -82,7 +82,7 @@ def test_many_leaves_get_their_signals_from_one_dispatch(gl, presets):
         finally:
             gl.ctx.detect_framebuffer(0).use()
             fbo.release()
-    from leafview.model.leaf import grid_uv
+    from leafview.deform.surface import grid_uv
 
     uv = grid_uv(9, 15)
     for i in (0, 11, 23):

@@ -8,11 +8,11 @@ import json
 import numpy as np
 import pytest
 
-from tests.conftest import assert_matches_reference
 from leafview.cli import main
+from leafview.core.params import LeafParams, ParamError
 from leafview.gpu.layout import LEAF_BLOCK, pack_leaf
-from leafview.model.params import LeafParams, ParamError
-from leafview.model.scene import SceneSpec, build_scene, evaluate_leaf, load_scene, save_scene
+from leafview.scene.spec import SceneSpec, build_scene, evaluate_leaf, load_scene, save_scene
+from tests.conftest import assert_matches_reference
 
 
 def _spec(presets, n=400, **kw) -> SceneSpec:
@@ -87,7 +87,7 @@ def test_vectorised_rows_match_per_leaf_packing(small):
         one["model"] = small.matrices[i].T
         for name in params_fields:
             if name in ("bend", "bend_axis"):
-                continue  # the species' droop (see leafview.model.scene)
+                continue  # the species' droop (see leafview.scene.spec)
             assert np.allclose(rows[i][name], one[name], rtol=2e-6, atol=1e-7), (i, name)
     assert not np.allclose(rows["xs"][0], rows["xs"][1])  # leaves differ
 
@@ -105,8 +105,8 @@ def test_batches_respect_the_block_limit():
 
 
 def test_frustum_planes_against_projected_points():
-    from leafview.camera import frame_view
     from leafview.gpu.scene import frustum_planes
+    from leafview.scene.camera import frame_view
 
     cam = frame_view("three-quarter", np.random.default_rng(0).uniform(-1, 1, (50, 3)), (320, 200))
     planes = frustum_planes(cam.proj @ cam.view)
@@ -141,8 +141,8 @@ def drawn(ctx, small):
 
 
 def test_rows_on_the_gpu_round_trip(drawn, small):
+    from leafview.deform.surface import axis_frames
     from leafview.gpu.scene import pack_scene
-    from leafview.model.leaf import axis_frames
 
     back = np.frombuffer(drawn.batches[0].rows.read(), LEAF_BLOCK.dtype)
     rows = pack_scene(small)
@@ -156,7 +156,7 @@ def test_rows_on_the_gpu_round_trip(drawn, small):
 
 
 def test_per_instance_readback_matches_reference(drawn, small):
-    from leafview.model.leaf import grid_uv
+    from leafview.deform.surface import grid_uv
 
     # three leaves of each species (maize: rippled and bent) and the last leaf
     picks = [int(i) for k in range(3) for i in np.flatnonzero(small.species_id == k)[:3]] + [len(small) - 1]
@@ -251,7 +251,7 @@ def test_cli_renders_and_saves(tmp_path, capsys, gl):
     assert rc == 0, capsys.readouterr().err
     text = capsys.readouterr().out
     assert "500 leaves" in text and "llvmpipe" in text.lower() or "drawn" in text
-    from leafview.imaging import read_image
+    from leafview.export.images import read_image
 
     image, _ = read_image(out)
     assert image.shape == (120, 160, 4) and (image[..., 3] > 0).any()
@@ -290,7 +290,7 @@ def test_cli_bad_scene_file(tmp_path, capsys):
 def test_bend_deviation_measures_the_shared_species_droop(presets):
     """A varied bent leaf droops with its species' profile, not its own solve: the deviation is
     reported (non-zero with variation, zero without)."""
-    from leafview.model.scene import bend_deviation
+    from leafview.scene.spec import bend_deviation
 
     maize = (presets["maize"],)
     varied = build_scene(SceneSpec(species=maize, leaves=60, seed=3, plants=1))

@@ -9,13 +9,13 @@ import json
 import jsonschema
 import numpy as np
 import pytest
-from tests.conftest import random_params
 
-from leafview.model import compact as C
-from leafview.model.params import LeafParams, ParamError, Transform
-from leafview.model.scene import SceneSpec
+from leafview.core import compact as C
+from leafview.core.params import LeafParams, ParamError, Transform
 from leafview.resources import builtin_presets
-from leafview.schema import SCHEMAS, main, published_path, schema_text
+from leafview.scene.schema import SCHEMAS, main, published_path, schema_text
+from leafview.scene.spec import SceneSpec
+from tests.conftest import random_params
 from tests.test_schema import _DELETE, _set
 
 
@@ -42,7 +42,7 @@ def _errors(validator, doc) -> list[str]:
 def test_published_files_equal_the_generated_schemas(capsys):
     for name in SCHEMAS:
         assert published_path(name).read_text(encoding="utf-8") == schema_text(name), \
-            f"assets/schema/{name} is stale: run python -m leafview.schema --write"
+            f"assets/schema/{name} is stale: run python -m leafview.scene.schema --write"
     assert main(["--check"]) == 0
     assert "scene.schema.json is up to date" in capsys.readouterr().out
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import pytest
 from imgui_bundle import imgui
 
-from leafview.model.scene import SceneSpec, build_scene
+from leafview.scene.spec import SceneSpec, build_scene
 
 pytestmark = pytest.mark.gl
 

@@ -10,11 +10,12 @@ import tomllib
 import jsonschema
 import numpy as np
 import pytest
-from tests.conftest import random_params
 
-from leafview.model.params import LeafParams, ParamError, parse_params
+from leafview.core.params import LeafParams, ParamError, parse_params
+from leafview.core.schema import leaf_schema
 from leafview.resources import builtin_presets
-from leafview.schema import leaf_schema, main, published_path, schema_text
+from leafview.scene.schema import main, published_path, schema_text
+from tests.conftest import random_params
 
 
 @pytest.fixture(scope="module")
@@ -26,7 +27,7 @@ def validator() -> jsonschema.Draft202012Validator:
 
 def test_published_file_equals_generated_schema():
     assert published_path().read_text(encoding="utf-8") == schema_text(), \
-        "assets/schema/leaf.schema.json is stale: run python -m leafview.schema --write"
+        "assets/schema/leaf.schema.json is stale: run python -m leafview.scene.schema --write"
     assert main(["--check"]) == 0
 
 
@@ -115,7 +116,7 @@ def test_optional_groups_and_fields_are_optional_in_both(validator):
 
 
 def test_schema_follows_the_field_specs():
-    from leafview.model.params import field_specs
+    from leafview.core.params import field_specs
 
     schema = leaf_schema()
     specs = field_specs()

@@ -8,16 +8,7 @@ import itertools
 import numpy as np
 import pytest
 
-from leafview.model.landmarks import (
-    LandmarkLeaf,
-    SideLandmarks,
-    check_margin,
-    outline,
-    outline_sides,
-    side_fit,
-)
-from leafview.model.params import ParamError
-from leafview.model.shapes import (
+from leafview.botany.catalogue import (
     MARGIN_TYPES,
     catalogue,
     catalogue_names,
@@ -28,6 +19,15 @@ from leafview.model.shapes import (
     random_instance,
     save_landmark_leaf,
 )
+from leafview.botany.landmarks import (
+    LandmarkLeaf,
+    SideLandmarks,
+    check_margin,
+    outline,
+    outline_sides,
+    side_fit,
+)
+from leafview.core.params import ParamError
 
 FIG5 = ["elliptic", "lanceolate", "oblanceolate", "rhomboidal", "deltoid", "linear", "oval", "ovate", "obovate",
         "orbicular", "oblong", "cordate", "obcordate", "reniform"]

@@ -5,10 +5,10 @@ import json
 
 import pytest
 
+from leafview.botany.catalogue import catalogue
 from leafview.cli import main
-from leafview.imaging import PARAMS_ATTRIBUTE, read_image
-from leafview.model.params import LeafParams
-from leafview.model.shapes import catalogue
+from leafview.core.params import LeafParams
+from leafview.export.images import PARAMS_ATTRIBUTE, read_image
 from leafview.shapes import shapes_params
 
 

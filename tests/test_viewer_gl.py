@@ -8,15 +8,14 @@ import shutil
 
 import numpy as np
 import pytest
-
 from imgui_bundle import imgui  # a hard dependency: missing means broken, not skipped
 
 from leafview.app.hotreload import ShaderWatcher  # noqa: E402
 from leafview.app.orbit import project  # noqa: E402
 from leafview.app.viewer import BACKGROUND, Viewer, open_state  # noqa: E402
+from leafview.core.params import LeafParams  # noqa: E402
+from leafview.export.images import PARAMS_ATTRIBUTE, read_image  # noqa: E402
 from leafview.gpu.layout import LEAF_BLOCK  # noqa: E402
-from leafview.imaging import PARAMS_ATTRIBUTE, read_image  # noqa: E402
-from leafview.model.params import LeafParams  # noqa: E402
 from leafview.resources import builtin_presets, shader_dir  # noqa: E402
 
 pytestmark = pytest.mark.gl
@@ -257,7 +256,7 @@ def test_an_exception_in_the_ui_is_reported_not_fatal(viewer, capsys):
 
 
 def test_edit_latency_measure_runs(gl):
-    from leafview.app.latency import measure_edit_latency
+    from leafview.bench.latency import measure_edit_latency
 
     res = measure_edit_latency(gl.ctx, pairs=2, warmup=1, size=(640, 400))
     assert res["edit_latency_ratio"] > 0 and res["viewer_frame_ms"] > 0

@@ -5,16 +5,16 @@ has never heard of gets widgets from its metadata alone."""
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import pytest
-
 from imgui_bundle import imgui  # a hard dependency: missing means broken, not skipped
 
 from leafview.app.chrome import FileBar  # noqa: E402
 from leafview.app.panel import ParamPanel, decimals, from_ui, groups_of  # noqa: E402
 from leafview.app.state import ViewerState  # noqa: E402
-from leafview.model.params import FieldSpec, field_specs  # noqa: E402
+from leafview.core.params import FieldSpec, field_specs  # noqa: E402
 from leafview.resources import builtin_presets, preset_dir  # noqa: E402
 
 SIZE = (700, 2200)

@@ -19,9 +19,9 @@ from leafview.app.handles import (
 )
 from leafview.app.orbit import OrbitCamera, project
 from leafview.app.state import HISTORY_LIMIT, ViewerState, get_field, with_field
-from leafview.model.bezier import evaluate_curve
-from leafview.model.leaf import control_polygons, evaluate
-from leafview.model.params import LeafParams, ParamError, field_specs
+from leafview.core.bezier import evaluate_curve
+from leafview.core.params import LeafParams, ParamError, field_specs
+from leafview.deform.surface import control_polygons, evaluate
 from leafview.resources import builtin_presets, preset_dir
 
 

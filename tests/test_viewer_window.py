@@ -16,8 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from leafview.imaging import PARAMS_ATTRIBUTE, read_image
-from leafview.model.params import LeafParams
+from leafview.core.params import LeafParams
+from leafview.export.images import PARAMS_ATTRIBUTE, read_image
 from leafview.resources import builtin_presets
 from tests.conftest import require_or_skip
 
@@ -121,7 +121,7 @@ SESSION = textwrap.dedent('''
     from imgui_bundle import imgui
     from leafview.app.viewer import open_state
     from leafview.app.window import ViewerWindow
-    from leafview.model.params import LeafParams
+    from leafview.core.params import LeafParams
     from leafview.resources import builtin_presets
 
     out = {"errors": []}

@@ -53,7 +53,7 @@ print("wrote", out)
 
 # -- a small scene: exported with one node per leaf, read back by trimesh, drawn by matplotlib ---
 from leafview.export import export_scene
-from leafview.model.scene import SceneSpec, build_scene
+from leafview.scene.spec import SceneSpec, build_scene
 
 spec = SceneSpec(species=(leafview.LeafParams.load(builtin_presets()["beech"]),), layout="plant", leaves=160,
                  seed=4, variation=0.15, colour_variation=0.1, plant={"height": 6.0, "branches": 6})

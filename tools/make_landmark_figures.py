@@ -11,15 +11,15 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from leafview.model.landmarks import side_fit
-from leafview.model.morph import keyframe_path, morph_path, smoothness
-from leafview.model.shapes import (
+from leafview.botany.catalogue import (
     catalogue,
     combine_sides,
     landmark_leaf,
     outline,
     random_instance,
 )
+from leafview.botany.landmarks import side_fit
+from leafview.botany.morph import keyframe_path, morph_path, smoothness
 
 FILL, EDGE = "#9cc97e", "#2d5a1b"
 

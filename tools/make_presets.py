@@ -1,7 +1,8 @@
 """Regenerate assets/presets/*.toml (run from the repository root: python tools/make_presets.py).
 
 The TOML files are the source of truth; this script records how they were made."""
-from leafview.model.params import LeafParams, parse_params
+from leafview.core.params import parse_params
+
 G = dict(front=[0.045, 0.15, 0.025], back=[0.13, 0.25, 0.06], translucency=0.35)
 def P(name, rows, a1=(0, 1/3, 0), a2=(0, 2/3, 0), zf=(0,0,0), zg=(0,0,0), zs=None, jitter=None, mat=None):
     rows = [[v, x, (zs[i] if zs else 0.0)] for i, (v, x) in enumerate(rows)]

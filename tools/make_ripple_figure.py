@@ -6,7 +6,7 @@ from dataclasses import replace
 import numpy as np
 
 import leafview
-from leafview.imaging import contact_sheet, write_image
+from leafview.export.images import contact_sheet, write_image
 from leafview.resources import builtin_presets
 
 maize = leafview.LeafParams.load(builtin_presets()["maize"])

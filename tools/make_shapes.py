@@ -1,4 +1,4 @@
-"""Precompute the shader-model fits of every catalogue shape (leafview.model.shapes.catalogue):
+"""Precompute the shader-model fits of every catalogue shape (leafview.botany.catalogue.catalogue):
 assets/shapes/<name>.toml (a leaf preset each) and assets/shapes/fits.json (their errors).
 
     python tools/make_shapes.py            # about a minute on 2 cores
@@ -17,9 +17,9 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from leafview.atomic import atomic_output  # noqa: E402
-from leafview.model.landmarks import outline  # noqa: E402
-from leafview.model.outline_fit import fit_outline  # noqa: E402
-from leafview.model.shapes import catalogue, landmark_leaf  # noqa: E402
+from leafview.botany.catalogue import catalogue, landmark_leaf  # noqa: E402
+from leafview.botany.landmarks import outline  # noqa: E402
+from leafview.botany.outline_fit import fit_outline  # noqa: E402
 
 OUT = ROOT / "assets" / "shapes"
 OUTLINE_POINTS = 256

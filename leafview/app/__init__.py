@@ -10,11 +10,11 @@ Layers, each usable without the ones above it:
   moderngl context (headless EGL in tests and benchmarks);
 * :mod:`~leafview.app.window`: the glfw window and event loop.
 
-The model (``leafview.model``) never imports this package.
+The layers below (``leafview.core`` … ``leafview.gpu``) never import this package (import-linter contracts in pyproject.toml).
 """
 
 from __future__ import annotations
 
-from .state import ViewerState, ViewSettings
+from leafview.app.state import ViewerState, ViewSettings
 
 __all__ = ["ViewerState", "ViewSettings"]

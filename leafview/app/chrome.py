@@ -7,12 +7,12 @@ Actions that would drop unsaved edits (open, switch preset, quit) go through
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from imgui_bundle import imgui
 
-from .state import ViewerState
+from leafview.app.state import ViewerState
 
 __all__ = ["FileBar", "KEYS", "draw_help", "draw_status", "draw_error_window", "ERROR_COLOR", "load_font"]
 

@@ -24,16 +24,19 @@ numpy only; the viewport projects these points and calls :func:`pick`.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from functools import lru_cache
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..model.bezier import bernstein, derivative_points
-from ..model.edits import set_silhouette_point, set_silhouette_row
-from ..model.leaf import control_polygons
-from ..model.params import LeafParams, ParamError
+from leafview.app.state import with_field
+from leafview.core.bezier import bernstein, derivative_points
+from leafview.core.edits import set_silhouette_point, set_silhouette_row
+from leafview.core.params import LeafParams, ParamError
+from leafview.deform.beam import bend_profile, rotation, sample_clamped
+from leafview.deform.surface import control_polygons
 
 __all__ = ["HANDLE_NAMES", "handle_names", "handle_points", "handle_parameters", "LeafFrame", "pick", "drag_handle",
            "to_world", "to_leaf_space", "plane_hit", "drag_plane_normal", "V_GAP"]
@@ -70,13 +73,9 @@ def handle_parameters(params: LeafParams) -> dict[str, float]:
 
 @lru_cache(maxsize=4)
 def _bend_profile(params: LeafParams) -> Any:
-    """The midrib bend of ``params`` (``leafview.model.beam``), or None when it does not bend."""
+    """The midrib bend of ``params`` (``leafview.deform.beam``), or None when it does not bend."""
     bending = getattr(params, "bending", None)
     if bending is None or not getattr(bending, "active", False):
-        return None
-    try:
-        from ..model.beam import bend_profile
-    except ImportError:  # a model without bending
         return None
     profile = bend_profile(params)
     return None if profile.identity else profile
@@ -84,7 +83,7 @@ def _bend_profile(params: LeafParams) -> Any:
 
 class LeafFrame:
     """Maps overlay points between leaf space (the unbent model of eqs 1-6, where control points
-    live) and world space: the midrib bend and twist of ``leafview.model.leaf`` (``p' = A(v) +
+    live) and world space: the midrib bend and twist of ``leafview.deform.surface`` (``p' = A(v) +
     Δ(v) + R(v)(p - A(v))`` at the point's axis parameter ``v``), then the leaf's transform."""
 
     def __init__(self, params: LeafParams) -> None:
@@ -95,7 +94,6 @@ class LeafFrame:
 
     def _bend(self, v: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """A(v), Δ(v) and R(v) for points at axis parameters ``v``."""
-        from ..model.beam import rotation, sample_clamped
 
         vv = np.clip(np.atleast_1d(np.asarray(v, np.float64)), 0.0, 1.0)
         a = bernstein(3, vv) @ self.axis_points
@@ -133,7 +131,7 @@ class LeafFrame:
 
 def to_world(params: LeafParams, points: ArrayLike) -> NDArray[np.float64]:
     """Leaf space to world space with the leaf's transform (no bend: for surface points that
-    already include it, such as :func:`leafview.model.leaf.tessellate` vertices)."""
+    already include it, such as :func:`leafview.deform.surface.tessellate` vertices)."""
     m = params.transform.matrix()
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     return p @ m[:3, :3].T + m[:3, 3]
@@ -214,7 +212,6 @@ def drag_handle(params: LeafParams, name: str, leaf_point: ArrayLike) -> LeafPar
         raise ParamError(name, "the handle left the view (no finite position)")
     sh = params.shape
     if name in ("a1", "a2"):
-        from .state import with_field
 
         old = getattr(sh, name)
         return with_field(params, f"shape.{name}", [float(p[0]), float(p[1]), old[2]])

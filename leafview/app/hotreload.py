@@ -13,9 +13,9 @@ from pathlib import Path
 
 import moderngl
 
-from ..gpu.renderer import LeafRenderer
-from ..gpu.shaders import ShaderError, build_compute, build_program
-from ..resources import shader_dir
+from leafview.gpu.renderer import LeafRenderer
+from leafview.gpu.shaders import ShaderError, build_compute, build_program
+from leafview.resources import shader_dir
 
 __all__ = ["ShaderWatcher", "compile_check", "rebuild_renderer", "SHADER_SUFFIXES"]
 

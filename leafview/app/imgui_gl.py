@@ -16,7 +16,7 @@ import moderngl
 import numpy as np
 from imgui_bundle import imgui
 
-from ..gpu.shaders import build_program
+from leafview.gpu.shaders import build_program
 
 __all__ = ["ImguiRenderer"]
 

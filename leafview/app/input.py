@@ -12,11 +12,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from imgui_bundle import imgui
 
-from .handles import drag_handle, drag_plane_normal, pick, plane_hit
-from .orbit import project
+from leafview.app.handles import drag_handle, drag_plane_normal, pick, plane_hit
+from leafview.app.orbit import project
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .viewer import Viewer
+    from leafview.app.viewer import Viewer
 
 __all__ = ["ViewportInput"]
 
@@ -26,7 +26,7 @@ PICK_RADIUS = 10.0
 class ViewportInput:
     """The viewport's interaction state: the current drag and the handle under the mouse."""
 
-    def __init__(self, viewer: "Viewer") -> None:
+    def __init__(self, viewer: Viewer) -> None:
         self.viewer = viewer
         self.drag: dict[str, Any] | None = None   # kind, button, (handle, plane point, normal)
         self.hot: str | None = None

@@ -15,8 +15,11 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
 
-from ..model.params import LeafParams, Shape
-from .state import ViewerState
+from leafview.app.state import ViewerState
+from leafview.botany.catalogue import catalogue_names
+from leafview.botany.morph import morph_path
+from leafview.core.params import Shape
+from leafview.gpu.morph import fit_frame
 
 __all__ = ["MorphController", "MorphPanel"]
 
@@ -25,14 +28,12 @@ NO_REFERENCE = "(none)"
 
 @lru_cache(maxsize=1)
 def _names() -> tuple[str, ...]:
-    from ..model.shapes import catalogue_names
 
     return tuple(catalogue_names())
 
 
 @lru_cache(maxsize=16)
 def _path(source: str, target: str, ref: str, weight: float) -> Any:
-    from ..model.morph import morph_path
 
     refs = [] if ref == NO_REFERENCE else [(ref, weight)]
     return morph_path(source, target, refs)
@@ -40,7 +41,6 @@ def _path(source: str, target: str, ref: str, weight: float) -> Any:
 
 @lru_cache(maxsize=256)
 def _fit(source: str, target: str, ref: str, weight: float, t: float, polish: bool) -> tuple[Shape, float]:
-    from ..shapes.morph import fit_frame
 
     fit = fit_frame(_path(source, target, ref, weight).sample(t), polish=polish)
     return fit.parts[0].shape, fit.error   # catalogue shapes and their morphs are symmetric: one leaf

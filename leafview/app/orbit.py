@@ -1,6 +1,6 @@
 """The viewport camera: orbit about a target, pan, dolly, reset and frame (numpy only).
 
-Angles follow :mod:`leafview.camera`: azimuth 0 looks from -y towards +y, positive azimuth moves
+Angles follow :mod:`leafview.scene.camera`: azimuth 0 looks from -y towards +y, positive azimuth moves
 the eye towards +x, elevation is above the leaf plane (z up). Screen coordinates are pixels with
 the origin at the top-left of the viewport, as imgui reports the mouse.
 """
@@ -14,7 +14,7 @@ import numpy as np
 import pyrr
 from numpy.typing import ArrayLike, NDArray
 
-from ..camera import Camera
+from leafview.scene.camera import Camera
 
 __all__ = ["OrbitCamera", "project", "HOME_AZIMUTH", "HOME_ELEVATION"]
 
@@ -36,7 +36,7 @@ class OrbitCamera:
     radius: float = 0.6        # size of what is framed: sets near/far and dolly limits
 
     @classmethod
-    def framing(cls, points: ArrayLike, aspect: float = 1.0) -> "OrbitCamera":
+    def framing(cls, points: ArrayLike, aspect: float = 1.0) -> OrbitCamera:
         """The home view (three-quarter) framed on ``points`` (N, 3)."""
         cam = cls(target=np.zeros(3))
         cam.frame(points, aspect)
@@ -52,7 +52,7 @@ class OrbitCamera:
         return self.target + self.distance * self.direction()
 
     def camera(self, width: int, height: int) -> Camera:
-        """The :class:`~leafview.camera.Camera` for a viewport of ``width`` × ``height`` pixels."""
+        """The :class:`~leafview.scene.camera.Camera` for a viewport of ``width`` × ``height`` pixels."""
         aspect = max(width, 1) / max(height, 1)
         eye = self.eye()
         view = pyrr.matrix44.create_look_at(eye, self.target, np.array([0.0, 0.0, 1.0]),

@@ -8,17 +8,17 @@ then costs one small uniform write and a few draws.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
-from ..gpu.shaders import build_program
-from ..model.bezier import bernstein
-from ..model.leaf import control_polygons
-from ..model.params import LeafParams
-from .handles import HANDLE_NAMES, LeafFrame, handle_names, handle_parameters, handle_points
+from leafview.app.handles import HANDLE_NAMES, LeafFrame, handle_names, handle_parameters, handle_points
+from leafview.core.bezier import bernstein
+from leafview.core.params import LeafParams
+from leafview.deform.surface import control_polygons
+from leafview.gpu.shaders import build_program
 
 __all__ = ["Overlay", "CURVE_COLORS", "control_lines", "ground_lines"]
 

@@ -1,4 +1,4 @@
-"""The parameter panel: one imgui widget per field of :func:`~leafview.model.params.field_specs`,
+"""The parameter panel: one imgui widget per field of :func:`~leafview.core.params.field_specs`,
 grouped by ``FieldSpec.group``, plus the sec. 6 edit sliders and the view settings.
 
 Nothing here knows the parameter groups by name: a group added to ``LeafParams`` (ripple,
@@ -14,14 +14,15 @@ from __future__ import annotations
 
 import math
 import unicodedata
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from imgui_bundle import imgui
 
-from ..model.edits import curve_axis, curve_longitudinal, scale_width, skew_axis
-from ..model.params import FieldSpec, LeafParams
-from .state import ViewerState
+from leafview.app.state import ViewerState
+from leafview.core.edits import curve_axis, curve_longitudinal, scale_width, skew_axis
+from leafview.core.params import FieldSpec, LeafParams
 
 __all__ = ["ParamPanel", "decimals", "groups_of", "from_ui", "plain_label"]
 

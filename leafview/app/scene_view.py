@@ -21,11 +21,12 @@ import numpy as np
 from imgui_bundle import imgui
 from numpy.typing import NDArray
 
-from ..gpu.scene import CullSettings, SceneRenderer
-from ..model.scene import Scene
-from .imgui_gl import ImguiRenderer
-from .orbit import OrbitCamera
-from .viewer import begin_io
+from leafview.app.imgui_gl import ImguiRenderer
+from leafview.app.orbit import OrbitCamera
+from leafview.app.viewer import begin_io
+from leafview.app.window import ViewerWindow
+from leafview.gpu.scene import CullSettings, SceneRenderer
+from leafview.scene.spec import Scene
 
 __all__ = ["SceneView", "view_scene"]
 
@@ -226,7 +227,6 @@ class SceneView:
 def view_scene(scene: Scene, size: tuple[int, int] = (1280, 800), frames: int | None = None,
                screenshot: str | Path | None = None) -> int:
     """Open ``scene`` in a window (blocks until closed); returns the exit code."""
-    from .window import ViewerWindow
 
     with ViewerWindow(None, size, title="leafview scene", make_view=lambda ctx: SceneView(ctx, scene)) as win:
         return win.run(frames=frames, screenshot=screenshot)

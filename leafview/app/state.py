@@ -3,18 +3,20 @@
 No GL and no imgui here: the panel, the viewport handles, keyboard shortcuts and the tests all
 change the leaf through the same :class:`ViewerState` methods (:meth:`ViewerState.set_field`,
 :meth:`ViewerState.apply`, :meth:`ViewerState.undo`, ...). Every change is validated by
-:func:`leafview.model.params.parse_params`; an invalid value sets :attr:`ViewerState.error` (which
+:func:`leafview.core.params.parse_params`; an invalid value sets :attr:`ViewerState.error` (which
 names the field) and leaves the leaf as it was.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, fields, is_dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
-from ..model.params import LeafParams, ParamError, field_specs, parse_params
+from leafview.core.defaults import DEFAULT_GRID
+from leafview.core.params import LeafParams, ParamError, field_specs, parse_params
 
 __all__ = ["ViewerState", "ViewSettings", "get_field", "with_field", "HISTORY_LIMIT"]
 
@@ -29,7 +31,7 @@ class ViewSettings:
     show_controls: bool = True      # control polygons of A, S, F, G and the drag handles (C)
     show_ground: bool = True        # ground grid (G)
     show_help: bool = False         # key table overlay (H / F1)
-    grid: tuple[int, int] = (33, 65)  # (u, v) samples of the drawn surface
+    grid: tuple[int, int] = DEFAULT_GRID  # (u, v) samples of the drawn surface
     light_azimuth: float = 37.9     # key light, degrees (0 = from -y, towards +x positive)
     light_elevation: float = 55.2   # degrees above the leaf plane
 

@@ -23,20 +23,21 @@ import numpy as np
 from imgui_bundle import imgui
 from numpy.typing import NDArray
 
-from ..gpu.renderer import LeafRenderer, Lighting
-from ..model.leaf import tessellate
-from ..model.params import LeafParams
-from ..resources import builtin_presets, preset_dir
-from . import hotreload
-from .chrome import FileBar, draw_error_window, draw_help, draw_status, load_font
-from .handles import to_world
-from .imgui_gl import ImguiRenderer
-from .input import ViewportInput
-from .orbit import OrbitCamera
-from .overlay import Overlay
-from .morph_panel import MorphPanel
-from .panel import ParamPanel
-from .state import ViewerState
+from leafview.app import hotreload
+from leafview.app.chrome import FileBar, draw_error_window, draw_help, draw_status, load_font
+from leafview.app.handles import to_world
+from leafview.app.imgui_gl import ImguiRenderer
+from leafview.app.input import ViewportInput
+from leafview.app.morph_panel import MorphPanel
+from leafview.app.orbit import OrbitCamera
+from leafview.app.overlay import Overlay
+from leafview.app.panel import ParamPanel
+from leafview.app.state import ViewerState
+from leafview.core.params import LeafParams
+from leafview.deform.surface import tessellate
+from leafview.export.images import ImageWriteError, write_image
+from leafview.gpu.renderer import LeafRenderer, Lighting
+from leafview.resources import builtin_presets, preset_dir
 
 __all__ = ["Viewer", "PANEL_WIDTH", "BACKGROUND", "open_state", "is_software"]
 
@@ -315,7 +316,6 @@ class Viewer:
 
     # -- screenshots, shaders, errors -----------------------------------------------------------
     def _write_screenshot(self, w: int, h: int) -> None:
-        from ..imaging import ImageWriteError, write_image
 
         img = self.read_frame((0, 0, w, h))
         stem = (self.state.path.stem if self.state.path else self.state.params.name) or "leaf"
@@ -377,7 +377,7 @@ class Viewer:
             imgui.destroy_context(self.imgui_ctx)
             self.imgui_ctx = None
 
-    def __enter__(self) -> "Viewer":
+    def __enter__(self) -> Viewer:
         return self
 
     def __exit__(self, *exc: object) -> None:

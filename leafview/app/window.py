@@ -10,16 +10,18 @@ from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import glfw
 import moderngl
 
-from ..gpu.context import GLUnavailable
-from .platform import GlfwInput
-from .state import ViewerState
-from .viewer import Viewer
+from leafview.app.platform import GlfwInput
+from leafview.app.state import ViewerState
+from leafview.app.viewer import Viewer
+from leafview.export.images import write_image
+from leafview.gpu.context import GLUnavailable
 
 __all__ = ["ViewerWindow", "NO_DISPLAY_HELP"]
 
@@ -154,7 +156,6 @@ class ViewerWindow:
 
     def write_screenshot(self, path: str | Path, frames: int) -> Path:
         """The whole window (scene and panel) of the last frame, written with OpenImageIO."""
-        from ..imaging import write_image
 
         assert self.viewer is not None
         img = self.viewer.read_frame()
@@ -177,7 +178,7 @@ class ViewerWindow:
             self.window = None
         glfw.terminate()
 
-    def __enter__(self) -> "ViewerWindow":
+    def __enter__(self) -> ViewerWindow:
         return self
 
     def __exit__(self, *exc: object) -> None:

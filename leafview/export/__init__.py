@@ -15,10 +15,20 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import UsageError
-from ..model.params import LeafParams
-from .mesh import BACKENDS, DEFAULT_RESOLUTION, LeafMesh, NonFiniteMesh, bake, bake_many
-from .scene import (
+from leafview.core.params import LeafParams
+from leafview.errors import UsageError
+from leafview.export.gltf import BACK_FACES, INSTANCING_MODES, write_gltf
+from leafview.export.mesh import (
+    BACKENDS,
+    DEFAULT_RESOLUTION,
+    LeafMesh,
+    NonFiniteMesh,
+    bake,
+    bake_many,
+    check_resolution,
+)
+from leafview.export.objply import UP_AXES, write_obj, write_ply
+from leafview.export.scene import (
     ExportPart,
     ExportScene,
     SceneLike,
@@ -26,6 +36,7 @@ from .scene import (
     leaves_scene,
     scene_from,
 )
+from leafview.export.usd import write_usd
 
 __all__ = [
     "BACKENDS",
@@ -64,8 +75,6 @@ def format_of(path: str | Path) -> str:
 
 def _check_options(fmt: str, options: dict[str, Any]) -> dict[str, Any]:
     """Keep the options ``fmt`` uses (None means default) and validate their values early."""
-    from .gltf import BACK_FACES, INSTANCING_MODES
-    from .objply import UP_AXES
 
     kept = {k: v for k, v in options.items() if v is not None and k in _OPTIONS[fmt]}
     unknown = set(options) - {"back_faces", "instancing", "instance_threshold", "up"}
@@ -91,7 +100,6 @@ def _check_length(length_m: float) -> float:
 
 def _check_glb_size(scene: SceneLike, resolution: Sequence[int]) -> None:
     """Refuse before baking a scene whose GLB would pass the format's 4 GiB limit."""
-    from .mesh import check_resolution
 
     nu, nv = check_resolution(resolution)
     verts, tris = nu * nv - 2, 2 * (nu - 1) * (nv - 1) - 2 * (nu - 1)
@@ -110,18 +118,14 @@ def write(scene: ExportScene, path: str | Path, **options: Any) -> Path:
     kept = _check_options(fmt, options)
     scene.length_m = _check_length(scene.length_m)
     if fmt in ("glb", "gltf"):
-        from .gltf import write_gltf
 
         return write_gltf(scene, path, **kept)
     if fmt == "obj":
-        from .objply import write_obj
 
         return write_obj(scene, path, **kept)
     if fmt == "ply":
-        from .objply import write_ply
 
         return write_ply(scene, path, **kept)
-    from .usd import write_usd
 
     return write_usd(scene, path, **kept)
 

@@ -33,11 +33,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import __version__
-from ..atomic import atomic_output
-from ..errors import UsageError
-from .mesh import LeafMesh, check_mesh
-from .scene import BARK, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs
+from leafview._version import __version__
+from leafview.atomic import atomic_output
+from leafview.errors import UsageError
+from leafview.export.mesh import LeafMesh, check_mesh
+from leafview.export.scene import BARK, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs
 
 __all__ = ["BACK_FACES", "INSTANCING_MODES", "Z_UP_TO_Y_UP", "gltf_document", "write_gltf"]
 

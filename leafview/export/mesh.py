@@ -1,6 +1,6 @@
 """Baking a leaf into a triangle mesh: the vertices the renderer draws, ready for a file.
 
-The (u, v) grid of :func:`leafview.model.leaf.grid_uv` is evaluated either by the rendering
+The (u, v) grid of :func:`leafview.deform.surface.grid_uv` is evaluated either by the rendering
 vertex shader (``backend="gpu"``: transform-feedback readback through
 :meth:`leafview.gpu.LeafRenderer.capture`, the positions and normals the rasteriser receives) or
 by the float64 numpy reference the shader is tested against (``backend="numpy"``, no OpenGL
@@ -31,9 +31,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import UsageError
-from ..model.leaf import grid_indices, grid_uv, tessellate
-from ..model.params import LeafParams
+from leafview.core.defaults import DEFAULT_GRID
+from leafview.core.params import LeafParams
+from leafview.deform.surface import grid_indices, grid_uv, tessellate
+from leafview.errors import NonFiniteMesh, UsageError
+from leafview.gpu import default_renderer
 
 __all__ = [
     "BACKENDS",
@@ -47,13 +49,8 @@ __all__ = [
 ]
 
 BACKENDS = ("gpu", "numpy")
-DEFAULT_RESOLUTION = (33, 65)
+DEFAULT_RESOLUTION = DEFAULT_GRID
 _UNIT_TOL = 1e-3   # a normal further than this from unit length is rebuilt from the faces
-
-
-class NonFiniteMesh(UsageError):
-    """A baked leaf with NaN/Inf vertices or normals (or normals that cannot be repaired); the
-    message names the leaf and the first bad grid sample. Nothing is written."""
 
 
 @dataclass(frozen=True)
@@ -210,7 +207,6 @@ def bake_many(leaves: Iterable[LeafParams], resolution: Sequence[int] = DEFAULT_
     uv32 = grid_uv(nu, nv)
     uv = uv32.astype(np.float64)
     if backend == "gpu" and renderer is None:
-        from ..gpu import default_renderer
 
         renderer = default_renderer()
     out = []

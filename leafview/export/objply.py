@@ -21,11 +21,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import __version__
-from ..atomic import atomic_output
-from ..errors import UsageError
-from .mesh import check_mesh
-from .scene import ExportScene
+from leafview._version import __version__
+from leafview.atomic import atomic_output
+from leafview.errors import UsageError
+from leafview.export.mesh import check_mesh
+from leafview.export.scene import ExportScene
 
 __all__ = ["UP_AXES", "axis_matrix", "world_triangles", "write_obj", "write_ply"]
 

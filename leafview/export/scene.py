@@ -8,7 +8,7 @@ mesh, EXT_mesh_gpu_instancing, a USD PointInstancer, or world-space copies in OB
 
 Conventions: the world of leafview is +z up, lengths in leaf lengths (a leaf of scale 1 is 1 unit
 from base to apex); matrices are 4×4 float64 with column vectors (``world = M @ [x, y, z, 1]``),
-as :meth:`leafview.model.params.Transform.matrix`. Instanced formats store a matrix as
+as :meth:`leafview.core.params.Transform.matrix`. Instanced formats store a matrix as
 translation, rotation and scale (TRS); :func:`decompose_trs` splits it and reports how far the
 TRS product is from the matrix, so a matrix with shear is never silently changed.
 """
@@ -22,9 +22,9 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import NDArray
 
-from ..errors import UsageError
-from ..model.params import LeafParams, Material
-from .mesh import DEFAULT_RESOLUTION, LeafMesh, bake_many
+from leafview.core.params import LeafParams, Material
+from leafview.errors import UsageError
+from leafview.export.mesh import DEFAULT_RESOLUTION, LeafMesh, bake_many
 
 __all__ = [
     "BARK",
@@ -51,7 +51,7 @@ Stems = tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.uint32]]
 
 @runtime_checkable
 class SceneLike(Protocol):
-    """The scene interface the exporters read (``leafview.model.scene.Scene`` provides it).
+    """The scene interface the exporters read (``leafview.scene.spec.Scene`` provides it).
 
     ``shapes()``: the distinct leaf shapes (identity transform); ``shape_ids``: (N,) int32 index
     into it per leaf; ``matrices``: (N, 4, 4) float64 leaf space → world, column vectors, +z up;

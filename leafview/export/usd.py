@@ -34,12 +34,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from .. import __version__
-from ..atomic import atomic_output
-from ..errors import UsageError
-from .gltf import BACK_FACES
-from .mesh import LeafMesh, check_mesh
-from .scene import BARK, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs
+from leafview._version import __version__
+from leafview.atomic import atomic_output
+from leafview.errors import UsageError
+from leafview.export.gltf import BACK_FACES
+from leafview.export.mesh import LeafMesh, check_mesh
+from leafview.export.scene import BARK, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs
 
 __all__ = ["usd_layer", "write_usd"]
 

@@ -12,13 +12,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..model.params import LeafParams
-from .context import GLUnavailable, check_error, create_headless_context
-from .renderer import DEFAULT_GRID, LeafRenderer
-from .shaders import ShaderError
+from leafview.core.params import LeafParams
+from leafview.gpu.context import GLUnavailable, check_error, create_headless_context
+from leafview.gpu.renderer import DEFAULT_GRID, LeafRenderer
+from leafview.gpu.ripple import RipplePass
+from leafview.gpu.shaders import ShaderError
 
 __all__ = ["LeafRenderer", "GLUnavailable", "ShaderError", "create_headless_context", "check_error",
-           "default_renderer", "render", "evaluate", "shutdown", "DEFAULT_GRID"]
+           "default_renderer", "render", "evaluate", "shutdown", "DEFAULT_GRID", "gpu_fbm_noise"]
 
 _default: LeafRenderer | None = None
 
@@ -54,5 +55,17 @@ def render(params: LeafParams, size: Any = (256, 256), view: str = "top",
 def evaluate(params: LeafParams, u: ArrayLike, v: ArrayLike) -> NDArray[np.float32]:
     """Positions computed by the rendering vertex shader for grid parameters (u, v), (N, 3)
     float32: L_Ω(u, v), or for a one-sided leaf (``shape.half = ±1``) L_Ω at
-    :func:`leafview.model.leaf.drawn_uv` of (u, v)."""
+    :func:`leafview.deform.surface.drawn_uv` of (u, v)."""
     return default_renderer().capture(params, u, v)[0]
+
+
+def gpu_fbm_noise(n: int, beta: float, seed: int) -> NDArray[np.float32]:
+    """One fBm signal (Geng, Hu & Zhang 2014, eqs 1-2) from the compute pass on the shared headless
+    context, float32; :func:`leafview.fbm_noise` with ``backend="gpu"``."""
+    ctx = default_renderer().ctx
+    rp = RipplePass(ctx, n)
+    try:
+        rp.update([(seed, beta)])
+        return rp.read(0)
+    finally:
+        rp.release()

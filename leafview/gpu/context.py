@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import moderngl
 
+from leafview.errors import GLUnavailable
+
 __all__ = ["GLUnavailable", "create_headless_context", "REQUIRED_GL", "check_error"]
 
 REQUIRED_GL = 450
@@ -17,10 +19,6 @@ _EGL_HELP = (
     "  Fedora: dnf install mesa-libEGL mesa-dri-drivers\n"
     "  With an NVIDIA GPU, the driver's libEGL_nvidia must be installed."
 )
-
-
-class GLUnavailable(RuntimeError):
-    """No usable OpenGL 4.5 context could be created; the message says what to install."""
 
 
 def create_headless_context(require: int = REQUIRED_GL) -> moderngl.Context:

@@ -7,31 +7,32 @@ instanced call; ``leaf.vert`` (built with ``LEAF_INSTANCED``) evaluates L_Ω per
 
 :class:`BakedLeaves` draws the *same triangles* from world-space positions and normals baked
 ahead of time, either on the CPU with the numpy reference (:meth:`BakedLeaves.from_params`,
-:func:`leafview.model.leaf.tessellate`) or captured from the instanced vertex shader
+:func:`leafview.deform.surface.tessellate`) or captured from the instanced vertex shader
 (:meth:`BakedLeaves.from_instanced`, fast for 10⁴ leaves): one vertex buffer for all leaves
 (40 bytes a vertex), one index buffer, one draw call, ``leaf_baked.vert`` + the same ``leaf.frag``.
 
-Both are used by :mod:`leafview.benchmarks` (parameters vs baked meshes) and by the tests that
+Both are used by :mod:`leafview.bench.core` (parameters vs baked meshes) and by the tests that
 check they draw the same picture. Neither changes the framebuffer binding: bind a target, call
 ``set_camera`` and ``draw``. ``draw`` enables only the depth test.
 """
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import moderngl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..camera import Camera
-from ..model.leaf import JITTER_TABLE_SIZE, grid_indices, grid_uv, tessellate
-from ..model.params import Jitter, LeafParams, Material, Shape, Transform
-from .layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, LEAVES_BINDING, feature_defines, pack_leaves
-from .prepare import LeafPrepare
-from .ripple import RipplePass
-from .renderer import Lighting, fill_frame
-from .shaders import build_program
+from leafview.core.params import Jitter, LeafParams, Material, Shape, Transform
+from leafview.deform.surface import JITTER_TABLE_SIZE, grid_indices, grid_uv, tessellate
+from leafview.gpu.layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, LEAVES_BINDING, feature_defines, pack_leaves
+from leafview.gpu.prepare import LeafPrepare
+from leafview.gpu.renderer import Lighting, fill_frame
+from leafview.gpu.ripple import RipplePass
+from leafview.gpu.shaders import build_program
+from leafview.scene.camera import Camera
 
 __all__ = ["LEAVES_BINDING", "InstancedLeaves", "BakedLeaves", "pack_leaves", "bake_leaves",
            "scatter_leaves", "OffscreenTarget", "read_rgba"]
@@ -144,7 +145,7 @@ class OffscreenTarget:
         while self._objects:
             self._objects.pop().release()
 
-    def __enter__(self) -> "OffscreenTarget":
+    def __enter__(self) -> OffscreenTarget:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -335,14 +336,14 @@ class BakedLeaves(_Batch):
 
     @classmethod
     def from_params(cls, ctx: moderngl.Context, params: Sequence[LeafParams],
-                    grid: tuple[int, int] = (9, 15)) -> "BakedLeaves":
+                    grid: tuple[int, int] = (9, 15)) -> BakedLeaves:
         pos, nrm = bake_leaves(params, grid)
         front = [(*p.material.front, p.material.translucency) for p in params]
         back = [p.material.back for p in params]
         return cls(ctx, pos, nrm, grid, np.reshape(front, (-1, 4)), np.reshape(back, (-1, 3)))
 
     @classmethod
-    def from_instanced(cls, leaves: InstancedLeaves) -> "BakedLeaves":
+    def from_instanced(cls, leaves: InstancedLeaves) -> BakedLeaves:
         """Bake by capturing what ``leaves``' vertex shader computes (transform feedback): the
         fast way to bake many leaves; bit-identical vertices to the instanced draw. A
         framebuffer must be bound."""

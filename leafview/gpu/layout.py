@@ -9,18 +9,17 @@ A test checks each block against the size the linked program reflects.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
-
-from typing import Any, Iterable
-
 from numpy.typing import NDArray
 
-from ..model.beam import BEND_SAMPLES, bend_profile
-from ..model.fbm import RIPPLE_SAMPLES
-from ..model.leaf import APEX, BASE, JITTER_TABLE_SIZE, jitter_table
-from ..model.params import MAX_SILHOUETTE_ROWS, LeafParams
+from leafview.core.blade import APEX, BASE, JITTER_TABLE_SIZE, jitter_table
+from leafview.core.params import MAX_SILHOUETTE_ROWS, LeafParams
+from leafview.deform.beam import BEND_SAMPLES, bend_profile
+from leafview.deform.fbm import RIPPLE_SAMPLES
 
 __all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "SPECIES_CULL_BLOCK", "DRAW_COMMAND_DTYPE", "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources"]
 
@@ -91,7 +90,7 @@ LEAF_BLOCK = Block(
         ("ripple_l", "vec4", 1),   # P, λ, k, θ of eq. 5 for the u >= 0 half (left in the top view)
         ("ripple_r", "vec4", 1),   # P, λ, k, θ for the u < 0 half
         ("bend_axis", "vec4", 1),  # bend axis N (leaf space), twist at the apex (radians)
-        # extended silhouette (leafview.model.params: N > 3 rows and/or tilted rows):
+        # extended silhouette (leafview.core.params: N > 3 rows and/or tilted rows):
         ("tilt", "vec4", 1),       # φ_1..3 (radians); w: N when the leaf is extended, else 0
         ("sil_rows", "vec4", SIL_EXTRA_ROWS),  # rows 4..N: v̄_i, x̄s_i, z̄s_i, φ_i (radians)
         ("sil_fg", "vec4", _PAIRS(SIL_EXTRA_ROWS)),  # rows 4..N: (z̄f_i, z̄g_i) pairs
@@ -103,7 +102,7 @@ LEAF_BLOCK = Block(
         ("sil_axis", "vec4", SIL_EXTRA_ROWS),
         ("sil_heights", "vec4", SIL_EXTRA_ROWS),
         ("sil_tilt", "vec4", _PAIRS(MAX_SILHOUETTE_ROWS)),
-        # derived on the host by leafview.model.beam.bend_profile (eq. 4 by Newton's method):
+        # derived on the host by leafview.deform.beam.bend_profile (eq. 4 by Newton's method):
         ("bend", "vec4", BEND_SAMPLES),  # Δ_k (bent minus straight midrib), Φ_k at v = k/(K-1)
     ),
     "one leaf: Ω, jitter, material, transform, ripple and bend settings, then derived data",

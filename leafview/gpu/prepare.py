@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import moderngl
 
-from .layout import LEAF_BLOCK, LEAVES_BINDING
-from .shaders import build_compute
+from leafview.gpu.layout import LEAF_BLOCK, LEAVES_BINDING
+from leafview.gpu.shaders import build_compute
 
 __all__ = ["LeafPrepare"]
 

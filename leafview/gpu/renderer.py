@@ -8,25 +8,34 @@ grids and framebuffers are bounded so long batch runs do not grow.
 from __future__ import annotations
 
 from collections import OrderedDict
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import moderngl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ..camera import VIEWS, Camera, frame_view
-from ..model.leaf import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table
-from ..model.params import LeafParams
-from .context import create_headless_context
-from .layout import (FRAME_BINDING, FRAME_BLOCK, LEAF_BINDING, LEAF_BLOCK, feature_defines, pack_leaf, pack_leaves,
-                     ripple_keys)
-from .prepare import LeafPrepare
-from .ripple import RipplePass
-from .shaders import build_program
+from leafview.core.defaults import DEFAULT_GRID
+from leafview.core.params import LeafParams
+from leafview.deform.surface import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table
+from leafview.gpu.context import create_headless_context
+from leafview.gpu.layout import (
+    FRAME_BINDING,
+    FRAME_BLOCK,
+    LEAF_BINDING,
+    LEAF_BLOCK,
+    feature_defines,
+    pack_leaf,
+    pack_leaves,
+    ripple_keys,
+)
+from leafview.gpu.prepare import LeafPrepare
+from leafview.gpu.ripple import RipplePass
+from leafview.gpu.shaders import build_program
+from leafview.scene.camera import VIEWS, Camera, frame_view
 
 __all__ = ["LeafRenderer", "DEFAULT_GRID", "BATCH", "Lighting", "fill_frame"]
 
-DEFAULT_GRID = (33, 65)
 BATCH = 64            # leaves per atlas in render_many
 _MAX_ATLAS = 4096     # atlas side limit in pixels (well inside GL_MAX_RENDERBUFFER_SIZE)
 _MAX_CACHED = 3       # framebuffers
@@ -137,7 +146,7 @@ class LeafRenderer:
         if self._owns_ctx:
             self.ctx.release()
 
-    def __enter__(self) -> "LeafRenderer":
+    def __enter__(self) -> LeafRenderer:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -259,7 +268,7 @@ class LeafRenderer:
         The vertices of every leaf are first captured from the vertex shader in one pass (so the
         framing uses exactly the drawn vertices), then all leaves are drawn into tiles of one
         atlas, resolved and read back once per chunk of up to :data:`BATCH` leaves.
-        ``camera`` (from :func:`leafview.camera.frame_view`) replaces the per-leaf framing with one
+        ``camera`` (from :func:`leafview.scene.camera.frame_view`) replaces the per-leaf framing with one
         camera for all (frame sequences that must not jump in scale); ``view`` still names it.
         """
         w, h = _check_size(size)

@@ -7,16 +7,16 @@ sampling interval k and phase θ live in the leaf's uniform block.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
-from ..model.fbm import MAX_SAMPLES, RIPPLE_SAMPLES
-from .shaders import build_compute
+from leafview.deform.fbm import MAX_SAMPLES, RIPPLE_SAMPLES
+from leafview.gpu.shaders import build_compute
 
-__all__ = ["RipplePass", "RIPPLE_SAMPLES", "SIGNALS_BINDING", "gpu_fbm_noise"]
+__all__ = ["RipplePass", "RIPPLE_SAMPLES", "SIGNALS_BINDING"]
 
 SIGNALS_BINDING = 3
 _JOBS_BINDING = 5
@@ -90,16 +90,3 @@ class RipplePass:
 
 def _grow(n: int) -> int:
     return 1 << max(0, int(n - 1).bit_length())
-
-
-def gpu_fbm_noise(n: int, beta: float, seed: int) -> NDArray[np.float32]:
-    """One fBm signal from the compute pass on the shared headless context, float32."""
-    from . import default_renderer
-
-    ctx = default_renderer().ctx
-    rp = RipplePass(ctx, n)
-    try:
-        rp.update([(seed, beta)])
-        return rp.read(0)
-    finally:
-        rp.release()

@@ -20,24 +20,38 @@ are split into batches automatically (:func:`plan_batches`).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
-from ..camera import Camera, frame_view
-from ..model.leaf import evaluate, grid_indices, grid_uv
-from ..model.scene import Scene
-from .context import check_error
-from .instanced import read_rgba
-from .layout import (DRAW_COMMAND_DTYPE, FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, LEAVES_BINDING,
-                     SPECIES_CULL_BLOCK, feature_defines, pack_leaves, ripple_keys)
-from .prepare import LeafPrepare
-from .renderer import Lighting, fill_frame
-from .ripple import RipplePass
-from .shaders import build_compute, build_program
+from leafview.core.defaults import DEFAULT_GRID
+from leafview.core.params import LeafParams
+from leafview.deform.surface import evaluate, grid_indices, grid_uv
+from leafview.errors import SceneLimitError
+from leafview.gpu.context import check_error
+from leafview.gpu.instanced import read_rgba
+from leafview.gpu.layout import (
+    DRAW_COMMAND_DTYPE,
+    FRAME_BINDING,
+    FRAME_BLOCK,
+    LEAF_BLOCK,
+    LEAVES_BINDING,
+    SPECIES_CULL_BLOCK,
+    feature_defines,
+    pack_leaves,
+    ripple_keys,
+)
+from leafview.gpu.prepare import LeafPrepare
+from leafview.gpu.renderer import Lighting, fill_frame
+from leafview.gpu.ripple import RipplePass
+from leafview.gpu.shaders import build_compute, build_program
+from leafview.resources import resolve_preset
+from leafview.scene.camera import Camera, frame_view
+from leafview.scene.spec import Scene, SceneSpec
 
 __all__ = ["LOD_GRIDS", "CullSettings", "SceneRenderer", "SceneLimitError", "pack_scene", "species_cull", "plan_batches",
            "frustum_planes", "cull_reference", "scene_camera", "SCENE_VIEWS"]
@@ -48,10 +62,6 @@ STEM_FRONT = (0.30, 0.22, 0.14, 0.0)
 STEM_BACK = (0.30, 0.22, 0.14)
 SCENE_VIEWS = ("three-quarter", "top", "front", "side", "ground")
 _LOCAL = 64
-
-
-class SceneLimitError(ValueError):
-    """A scene that cannot be drawn within this context's limits; the message names the limit."""
 
 
 # -- packing (numpy) ------------------------------------------------------------------------------
@@ -65,7 +75,7 @@ def species_tables(scene: Scene) -> tuple[NDArray[Any], NDArray[np.float32], lis
 def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
                species_records: NDArray[Any] | None = None) -> NDArray[Any]:
     """LEAF_BLOCK rows of leaves ``start:stop``, vectorised: the species' record with Ω scaled by
-    the leaf's factors (as :func:`leafview.model.scene.vary_shape`), colours by its tint and the
+    the leaf's factors (as :func:`leafview.scene.spec.vary_shape`), colours by its tint and the
     model matrix set. Derived members are filled later by the prepare pass on the GPU."""
     stop = len(scene) if stop is None else stop
     if species_records is None:
@@ -87,7 +97,7 @@ def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
     return recs
 
 
-def _lod_error(params: Any, coarse: tuple[int, int], fine: tuple[int, int] = (33, 65)) -> float:
+def _lod_error(params: Any, coarse: tuple[int, int], fine: tuple[int, int] = DEFAULT_GRID) -> float:
     """Largest distance (leaf lengths) between the surface and the piecewise-bilinear surface
     through the ``coarse`` grid, sampled at the ``fine`` grid: how far the drawn outline can
     move when a leaf drops to ``coarse``."""
@@ -115,7 +125,7 @@ def species_cull(scene: Scene, grids: Sequence[tuple[int, int]] = LOD_GRIDS) -> 
     if len(grids) > 4:
         raise ValueError("at most 4 levels of detail")
     out = np.zeros(len(scene.species), SPECIES_CULL_BLOCK.dtype)
-    uv = grid_uv(33, 65).astype(np.float64)
+    uv = grid_uv(*DEFAULT_GRID).astype(np.float64)
     var = scene.spec.variation
     for k, sp in enumerate(scene.species):
         pts = evaluate(sp, uv[:, 0], uv[:, 1])
@@ -222,7 +232,7 @@ class _SceneBatch:
     """GL objects of one batch of leaves: rows, species ids, the per-level visible lists, the
     draw commands and the vertex array that reads them."""
 
-    def __init__(self, owner: "SceneRenderer", start: int, stop: int) -> None:
+    def __init__(self, owner: SceneRenderer, start: int, stop: int) -> None:
         ctx = owner.ctx
         self.start, self.count = start, stop - start
         self.objects: list[Any] = []
@@ -253,7 +263,7 @@ class _SceneBatch:
 
 
 class SceneRenderer:
-    """Draws a :class:`~leafview.model.scene.Scene` with GPU culling and LOD.
+    """Draws a :class:`~leafview.scene.spec.Scene` with GPU culling and LOD.
 
     Parameters
     ----------
@@ -478,7 +488,7 @@ class SceneRenderer:
             obj = self.objects.pop()
             obj.release()
 
-    def __enter__(self) -> "SceneRenderer":
+    def __enter__(self) -> SceneRenderer:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -487,7 +497,6 @@ class SceneRenderer:
 
 def single_leaf_scene(params: Any) -> Scene:
     """A one-leaf :class:`Scene` at the origin (no variation): for LOD measurements."""
-    from ..model.scene import SceneSpec
 
     spec = SceneSpec(species=(params,), leaves=1, variation=0.0, colour_variation=0.0, stems=False)
     sp = (params.replace(transform=type(params.transform)()),)
@@ -502,8 +511,6 @@ def lod_switch_error(ctx: moderngl.Context, presets: Sequence[str], settings: Cu
     each level (no MSAA), and the Hausdorff distance between the two coverage masks is taken."""
     from scipy.ndimage import distance_transform_edt
 
-    from ..model.params import LeafParams
-    from ..resources import resolve_preset
 
     worst = 0.0
     for name in presets:
@@ -515,7 +522,7 @@ def lod_switch_error(ctx: moderngl.Context, presets: Sequence[str], settings: Cu
                 if err <= 0:
                     continue
                 ppu = settings.max_error_px / err * (1.0 + 1e-6)   # pixels per leaf length at the switch
-                pts = evaluate(params, *grid_uv(33, 65).astype(np.float64).T)
+                pts = evaluate(params, *grid_uv(*DEFAULT_GRID).astype(np.float64).T)
                 lo, hi = pts.min(axis=0), pts.max(axis=0)
                 w, h = (int(np.ceil((hi[i] - lo[i]) * ppu)) + 8 for i in (0, 1))
                 if max(w, h) > 4096:

@@ -9,14 +9,15 @@ encodes the file in the line number itself: line ``L`` of the k-th file becomes
 from __future__ import annotations
 
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping
 
 import moderngl
 
-from ..resources import shader_dir
-from .layout import generated_sources
+from leafview.errors import ShaderError
+from leafview.gpu.layout import generated_sources
+from leafview.resources import shader_dir
 
 __all__ = ["ShaderError", "ShaderSource", "preprocess", "build_program", "build_compute"]
 
@@ -26,20 +27,6 @@ _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
 _VERSION = re.compile(r"^\s*#\s*version\b")
 # Mesa "0:12(5): error: ..."; NVIDIA "0(12) : error C1008: ..."; AMD/Intel "ERROR: 0:12: ..."
 _LOG_LINE = re.compile(r"(?:^|\s)(\d+)(?::(\d+)\((\d+)\)|\((\d+)\)|:(\d+):)")
-
-
-class ShaderError(RuntimeError):
-    """A GLSL program failed to preprocess, compile or link.
-
-    ``stage`` is "vertex", "fragment", "compute" or "link"; ``location`` is ``file:line``
-    of the first error when the log names one.
-    """
-
-    def __init__(self, stage: str, location: str | None, log: str) -> None:
-        self.stage, self.location, self.log = stage, location, log
-        where = f" at {location}" if location else ""
-        super().__init__(f"{stage} shader{where}:\n{log}" if stage != "link"
-                         else f"program link failed{where}:\n{log}")
 
 
 @dataclass

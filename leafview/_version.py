@@ -1,0 +1,3 @@
+"""The package version, in one place (read by the writers that stamp files)."""
+
+__version__ = "0.1.0"

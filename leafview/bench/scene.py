@@ -1,0 +1,140 @@
+"""``leafview bench scene``: large scenes, measured side by side in one process.
+
+* ms/frame and leaves/s for field scenes of 10³, 10⁴ and 10⁵ leaves (1280×720, ``ground`` and
+  ``three-quarter`` cameras, culling and LOD on);
+* ``lod_speedup``: frame time with culling and LOD off ÷ on, for the 10⁵-leaf field seen from the
+  ``ground`` camera (interleaved pairs, median);
+* ``lod_switch_px``: largest outline change in pixels when a leaf switches level;
+* ``param_vs_baked_speed`` and ``baked_vs_param_bytes`` from the core suite's instancing
+  measurement (:func:`leafview.bench.core._scene`), so both suites report the same quantity;
+* the 10⁶-leaf field: build, upload and one 1280×720 frame, wall time (not in ``--quick``).
+
+Timings are medians with ``ctx.finish()`` before the clock stops; GL_RENDERER is part of the
+result. Nothing here is asserted.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from typing import Any
+
+from leafview.bench.core import _median_time, _Progress, _scene, bytes_per_leaf
+from leafview.core.params import LeafParams
+from leafview.gpu.context import check_error, create_headless_context
+from leafview.gpu.instanced import OffscreenTarget
+from leafview.gpu.scene import CullSettings, SceneRenderer, lod_switch_error, scene_camera
+from leafview.resources import resolve_preset
+from leafview.scene.spec import SceneSpec, build_scene
+
+__all__ = ["run", "format_table", "GOALS"]
+
+GOALS = {"lod_speedup": 2.0, "param_vs_baked_speed": 0.9, "baked_vs_param_bytes": 250.0,
+         "million_leaf_seconds": 60.0}
+SIZE = (1280, 720)
+SPECIES = ("ovate", "lanceolate", "elliptic")
+
+
+def _spec(n: int) -> Any:
+
+    species = tuple(LeafParams.load(resolve_preset(s)) for s in SPECIES)
+    return SceneSpec(species=species, leaves=n, seed=1, layout="field")
+
+
+def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
+
+    leaf_counts = (1_000, 5_000) if quick else (1_000, 10_000, 100_000)
+    progress = _Progress(len(leaf_counts) + 3)
+    own = ctx is None
+    if own:
+        ctx = create_headless_context()
+    res: dict[str, Any] = {"gl_renderer": str(ctx.info["GL_RENDERER"]), "gl_version": str(ctx.info["GL_VERSION"]),
+                           "size": list(SIZE), "quick": quick, "species": list(SPECIES), "frames": {}}
+    on, off = CullSettings(), CullSettings(cull=False, lod=False)
+    try:
+        with OffscreenTarget(ctx, SIZE) as target:
+            for n in leaf_counts:
+                progress.step(f"{n:,} leaves")
+                scene = build_scene(_spec(n))
+                with SceneRenderer(ctx, scene) as r:
+                    row: dict[str, Any] = {}
+                    for view in ("ground", "three-quarter"):
+                        r.set_camera(scene_camera(scene, SIZE, view), SIZE)
+
+                        def frame(settings: CullSettings = on) -> None:
+                            target.use()
+                            target.clear()
+                            r.draw(settings)
+
+                        frame()
+                        ctx.finish()
+                        t = _median_time(frame, 3 if quick else 5, ctx.finish)
+                        counts = r.level_counts()
+                        row[view] = {"ms": 1e3 * t, "leaves_per_s": n / t, "drawn": int(counts.sum()),
+                                     "levels": [int(c) for c in counts], "triangles": r.triangles(counts)}
+                        if view == "ground" and n == leaf_counts[-1]:
+                            ratios, t_off = [], []
+                            for _ in range(2 if quick else 3):
+                                a = _median_time(lambda: frame(off), 1, ctx.finish)
+                                b = _median_time(frame, 1, ctx.finish)
+                                ratios.append(a / b)
+                                t_off.append(a)
+                            res["lod_speedup"] = statistics.median(ratios)
+                            res["lod_speedup_leaves"] = n
+                            res["lod_off_ms"] = 1e3 * statistics.median(t_off)
+                        check_error(ctx, f"scene frame ({n} leaves, {view})")
+                    res["frames"][str(n)] = row
+            progress.step("LOD switch")
+            res["lod_switch_px"] = lod_switch_error(ctx, ("ovate", "lanceolate", "serrate", "maize"))
+            progress.step("parameters vs baked mesh")
+            n_pb = 300 if quick else 10_000
+            core = _scene(ctx, n_pb, 2 if quick else 9, progress)
+            res.update(param_vs_baked_speed=core["ratio"], param_vs_baked_range=list(core["ratio_range"]),
+                       instanced_leaves_per_s=n_pb / core["t_instanced"], baked_leaves_per_s=n_pb / core["t_baked"],
+                       scene_leaves=n_pb, triangles_per_leaf=core["triangles_per_leaf"], **bytes_per_leaf())
+            if not quick:
+                progress.step("10⁶ leaves")
+                t0 = time.perf_counter()
+                scene = build_scene(_spec(1_000_000))
+                t1 = time.perf_counter()
+                with SceneRenderer(ctx, scene) as r:
+                    t2 = time.perf_counter()
+                    r.render(scene_camera(scene, SIZE, "three-quarter"), SIZE)
+                    t3 = time.perf_counter()
+                    counts = r.level_counts()
+                    res["million"] = {"build_s": t1 - t0, "upload_s": t2 - t1, "frame_s": t3 - t2,
+                                      "batches": len(r.batches), "drawn": int(counts.sum()),
+                                      "triangles": r.triangles(counts)}
+                res["million_leaf_seconds"] = t3 - t0
+    finally:
+        progress.close()
+        if own:
+            ctx.release()
+    return res
+
+
+def format_table(res: dict[str, Any]) -> str:
+    lines = [f"leafview scene benchmark{' (quick)' if res['quick'] else ''}: {res['gl_renderer']} "
+             f"({res['gl_version']}), {res['size'][0]}×{res['size'][1]}, species {', '.join(res['species'])}"]
+    lines.append(f"{'leaves':>9}  {'camera':<13} {'ms/frame':>9} {'leaves/s':>12} {'drawn':>9}  levels (9×17/5×9/3×5)")
+    for n, row in res["frames"].items():
+        for view, r in row.items():
+            lines.append(f"{int(n):>9,}  {view:<13} {r['ms']:>9.1f} {r['leaves_per_s']:>12,.0f} {r['drawn']:>9,}  "
+                         f"{'/'.join(str(c) for c in r['levels'])}")
+
+    def goal(key: str, at_most: bool = False) -> str:
+        ok = res[key] <= GOALS[key] if at_most else res[key] >= GOALS[key]
+        return f"goal {'≤' if at_most else '≥'} {GOALS[key]:g}: {'met' if ok else 'NOT met'}"
+
+    lines.append(f"lod_speedup            {res['lod_speedup']:.2f}×  ({goal('lod_speedup')}; "
+                 f"{res['lod_speedup_leaves']:,} leaves, ground camera, off {res['lod_off_ms']:.0f} ms)")
+    lines.append(f"lod_switch_px          {res['lod_switch_px']:.2f} px (largest outline change at a level switch)")
+    lines.append(f"param_vs_baked_speed   {res['param_vs_baked_speed']:.3f}  ({goal('param_vs_baked_speed')}; "
+                 f"{res['scene_leaves']:,} leaves of {res['triangles_per_leaf']} triangles)")
+    lines.append(f"baked_vs_param_bytes   {res['baked_vs_param_bytes']:.0f}×  ({goal('baked_vs_param_bytes')})")
+    if "million" in res:
+        m = res["million"]
+        lines.append(f"10⁶ leaves offscreen   {res['million_leaf_seconds']:.1f} s  ({goal('million_leaf_seconds', True)}; "
+                     f"build {m['build_s']:.1f} s, upload {m['upload_s']:.1f} s in {m['batches']} batches, "
+                     f"frame {m['frame_s']:.1f} s, {m['drawn']:,} drawn, {m['triangles']:,} triangles)")
+    return "\n".join(lines)

@@ -1,0 +1,265 @@
+"""``leafview export``: bake presets (or a scene file) into glTF, OBJ, PLY or USD files, or write
+their compact parametric form.
+
+``-o NAME.leaf.json`` writes one leaf in the compact form and ``-o NAME.leaves.json`` a leaf set
+(every leaf of the presets, or every leaf of a scene as built), see
+:mod:`leafview.core.compact`; ``--digits N`` rounds their numbers. One preset and ``-o FILE``
+writes that file (a leaf set and ``-o FILE``: all its placed leaves in that file); several
+presets write one file each into ``-o DIR`` (format from ``--format``, default glb); a scene
+file (a TOML/JSON document with ``[[species]]``, see :mod:`leafview.scene.spec`) writes the
+whole scene into ``-o FILE``.
+Every input is validated before anything is baked; files are written atomically.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from leafview.cli import _expand, int_in_range, int_pair, load_leaf_files
+from leafview.core.io import read_document, save_leaves, save_params
+from leafview.errors import UsageError
+from leafview.export import (
+    DEFAULT_LENGTH_M,
+    FORMATS,
+    bake,
+    export_leaf,
+    export_scene,
+    format_of,
+    write,
+)
+from leafview.export.gltf import BACK_FACES, INSTANCING_MODES
+from leafview.export.mesh import BACKENDS, DEFAULT_RESOLUTION, check_resolution
+from leafview.export.objply import UP_AXES
+from leafview.export.scene import leaf_scene
+from leafview.gpu.context import GLUnavailable
+from leafview.scene.spec import build_scene, load_scene, scene_from_leaves
+
+__all__ = ["add_arguments", "run"]
+
+_FORMAT_NAMES = tuple(s.lstrip(".") for s in FORMATS)
+
+
+def _resolution(text: str) -> tuple[int, int]:
+    nu, nv = int_pair(text, lo=2, hi=1025, what="NUxNV", example="33x65")
+    try:
+        return check_resolution((nu, nv))
+    except UsageError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _length(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a length in metres, got {text!r}") from None
+    if not (0.0 < value < float("inf")):
+        raise argparse.ArgumentTypeError(f"length must be a positive number of metres, got {text}")
+    return value
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.description = ("Bake leaves into meshes with normals and texture coordinates (jitter, ripples "
+                          "and bending included; vertices read back from the rendering shader). "
+                          "Formats: .glb/.gltf (glTF 2.0), .obj, .ply, .usda/.usdc. See docs/export.md.")
+    parser.add_argument("inputs", nargs="+", metavar="PRESET|SCENE",
+                        help="preset files, directories of presets, built-in names, or one scene file")
+    parser.add_argument("-o", "--output", required=True, metavar="FILE|DIR")
+    parser.add_argument("--format", choices=_FORMAT_NAMES, default=None,
+                        help="file type for -o DIR (default glb), or to check -o FILE's suffix")
+    parser.add_argument("--resolution", type=_resolution, default=DEFAULT_RESOLUTION, metavar="NUxNV",
+                        help="(u, v) samples across and along the blade (default 33x65)")
+    parser.add_argument("--backend", choices=BACKENDS, default="gpu",
+                        help="gpu: vertices read back from the rendering shader (default); numpy: the "
+                             "float64 reference (no OpenGL needed)")
+    parser.add_argument("--length-m", type=_length, default=DEFAULT_LENGTH_M, metavar="M",
+                        help=f"metres per leaf length (default {DEFAULT_LENGTH_M}: a 10 cm leaf)")
+    parser.add_argument("--up", choices=UP_AXES, default="y", help="OBJ/PLY up axis (default y)")
+    parser.add_argument("--back-faces", choices=BACK_FACES, default="primitive",
+                        help="glTF/USD: the back colour as its own back-facing surface (default), or one "
+                             "double-sided surface in the front colour")
+    parser.add_argument("--instancing", choices=INSTANCING_MODES, default="auto",
+                        help="glTF scenes: EXT_mesh_gpu_instancing for shapes with >= 16 copies (auto), "
+                             "never (nodes) or always (ext)")
+    parser.add_argument("--digits", type=_digits, default=None, metavar="N",
+                        help="for .leaf.json/.leaves.json: round numbers to N significant digits "
+                             "(default: exact, the shortest decimal of each float64)")
+    parser.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
+
+
+def _digits(text: str) -> int:
+    return int_in_range(text, lo=1, hi=17, what="digits", name="--digits")
+
+
+_PARAMETRIC = (".leaf.json", ".leaves.json")
+
+
+def _parametric(out: Path) -> str | None:
+    name = out.name.lower()
+    return next((s for s in _PARAMETRIC if name.endswith(s)), None)
+
+
+def _run_parametric(args: argparse.Namespace, paths: list[Path], kind: str, started: float) -> int:
+    """Write the compact form: one leaf (.leaf.json) or a leaf set (.leaves.json)."""
+    from tqdm import tqdm
+
+
+    out = Path(args.output)
+    if args.format:
+        raise UsageError(f"-o {out} is a parametric file: --format applies to meshes only")
+    if out.is_dir():
+        raise UsageError(f"-o {out} is a directory; give a file name")
+    scenes = [p for p in paths if _is_scene(p)]
+    if scenes:
+        if len(paths) != 1 or kind != ".leaves.json":
+            raise UsageError(f"{scenes[0]} is a scene file: write its leaves on their own with -o NAME.leaves.json")
+
+        scene = build_scene(load_scene(scenes[0]))
+        with tqdm(total=len(scene), unit="leaf", desc="collecting", file=sys.stderr,
+                  disable=True if args.quiet else None) as bar:
+            leaves = scene.placed_leaves(bar.update)   # unnamed: a leaf set names them <stem>-<i>
+        what = f"{len(leaves):,} leaves of {scenes[0].name}"
+    else:
+        leaves = load_leaf_files(paths)
+        what = leaves[0].name if len(leaves) == 1 else f"{len(leaves)} leaves"
+    if kind == ".leaf.json":
+        if len(leaves) != 1:
+            raise UsageError(f"{len(leaves)} leaves do not fit one .leaf.json: use -o NAME.leaves.json")
+        save_params(leaves[0], out, digits=args.digits)
+    else:
+        save_leaves(leaves, out, digits=args.digits)
+    if not args.quiet:
+        size = out.stat().st_size
+        exact = "exact" if args.digits is None else f"{args.digits} significant digits"
+        print(f"wrote {out} ({what}, {size:,} bytes, {size / len(leaves):,.0f} B/leaf, {exact}) "
+              f"in {time.perf_counter() - started:.1f} s")
+    return 0
+
+
+def _is_scene(path: Path) -> bool:
+    if path.suffix.lower() not in (".toml", ".json") or not path.is_file():
+        return False
+
+    doc = read_document(path)
+    return isinstance(doc, dict) and "species" in doc
+
+
+def _options(args: argparse.Namespace, fmt: str) -> dict[str, Any]:
+    opts: dict[str, Any] = {}
+    if fmt in ("obj", "ply"):
+        opts["up"] = args.up
+    if fmt in ("glb", "gltf", "usda", "usdc"):
+        opts["back_faces"] = args.back_faces
+    if fmt in ("glb", "gltf"):
+        opts["instancing"] = args.instancing
+    return opts
+
+
+def _target(args: argparse.Namespace, count: int) -> tuple[str, Path, str]:
+    """('file' | 'dir', path, format)."""
+    out = Path(args.output)
+    if count == 1 and out.suffix:
+        fmt = format_of(out)
+        if args.format and args.format != out.suffix.lower().lstrip("."):
+            raise UsageError(f"-o {out} is a {out.suffix} file but --format {args.format} was given")
+        if out.is_dir():
+            raise UsageError(f"-o {out} is a directory; give a file name")
+        return "file", out, fmt
+    if out.suffix and out.suffix.lower() in FORMATS:
+        raise UsageError(f"{count} presets need -o DIR (one file each), not the file {out}")
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"-o {out} exists and is not a directory")
+    fmt = args.format or "glb"
+    return "dir", out, FORMATS["." + fmt]
+
+
+def _size(path: Path) -> str:
+    n = path.stat().st_size
+    return f"{n / 1e6:.1f} MB" if n >= 1e6 else f"{n / 1e3:.0f} kB"
+
+
+def run(args: argparse.Namespace) -> int:
+
+    try:
+        return _run(args)
+    except GLUnavailable as exc:
+        raise GLUnavailable(f"{exc}\n  export without OpenGL: --backend numpy (the float64 reference)") from None
+
+
+def _run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    started = time.perf_counter()
+    paths = _expand(args.inputs)
+    kind = _parametric(Path(args.output))
+    if kind:
+        return _run_parametric(args, paths, kind, started)
+    if args.digits is not None:
+        raise UsageError("--digits applies to .leaf.json/.leaves.json outputs only")
+    scenes = [p for p in paths if _is_scene(p)]
+    if scenes:
+        if len(paths) != 1:
+            raise UsageError(f"{scenes[0]} is a scene file: export it on its own")
+        return _run_scene(args, scenes[0], started)
+    leaves = load_leaf_files(paths)                       # validate everything first
+    if len(paths) == 1 and len(leaves) > 1 and Path(args.output).suffix.lower() in FORMATS:
+        return _run_scene(args, paths[0], started, leaves=leaves)   # a leaf set into one file
+    mode, out, fmt = _target(args, len(leaves))
+    names = [leaf.name for leaf in leaves]
+    if mode == "dir" and len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise UsageError(f"several presets are named {', '.join(dup)}: their files would overwrite each other")
+    opts = _options(args, fmt)
+    common = {"resolution": args.resolution, "backend": args.backend, "length_m": args.length_m}
+    if mode == "file":
+        mesh = bake(leaves[0], args.resolution, backend=args.backend)
+        write(leaf_scene(leaves[0], mesh, length_m=args.length_m), out, **opts)
+        if not args.quiet:
+            print(f"wrote {out} ({names[0]}, {mesh.n_vertices} vertices, {mesh.n_triangles} triangles, "
+                  f"{_size(out)}) in {time.perf_counter() - started:.1f} s")
+        return 0
+    suffix = next(s for s, f in FORMATS.items() if f == fmt)
+    written: list[Path] = []
+    bar = tqdm(total=len(leaves), unit="leaf", desc="exporting", file=sys.stderr,
+               disable=True if args.quiet else None)
+    try:
+        for leaf, name in zip(leaves, names):
+            written.append(export_leaf(leaf, out / f"{name}{suffix}", **common, **opts))
+            bar.update(1)
+    except BaseException:
+        for p in written:      # a failure leaves no half-finished directory behind
+            p.unlink(missing_ok=True)
+        raise
+    finally:
+        bar.close()
+    if not args.quiet:
+        print(f"wrote {len(written)} {fmt} files to {out}/ in {time.perf_counter() - started:.1f} s")
+    return 0
+
+
+def _run_scene(args: argparse.Namespace, path: Path, started: float, leaves: list[Any] | None = None) -> int:
+    """One file for a scene recipe, or for the placed leaves of a leaf set (``leaves``)."""
+    from tqdm import tqdm
+
+
+    out = Path(args.output)
+    fmt = format_of(out)
+    if args.format and args.format != out.suffix.lower().lstrip("."):
+        raise UsageError(f"-o {out} is a {out.suffix} file but --format {args.format} was given")
+    scene = build_scene(load_scene(path)) if leaves is None else scene_from_leaves(leaves, name=path.name)
+    shapes = len(np.unique(scene.shape_ids)) if len(scene) else 0
+    bar = tqdm(total=shapes, unit="shape", desc="baking", file=sys.stderr, disable=True if args.quiet else None)
+    try:
+        export_scene(scene, out, resolution=args.resolution, backend=args.backend, length_m=args.length_m,
+                     progress=bar.update, name=out.stem, **_options(args, fmt))
+    finally:
+        bar.close()
+    if not args.quiet:
+        print(f"wrote {out} ({len(scene)} leaves, {shapes} distinct shapes, {_size(out)}) "
+              f"in {time.perf_counter() - started:.1f} s")
+    return 0

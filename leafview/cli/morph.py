@@ -1,0 +1,146 @@
+"""``leafview morph``: a frame sequence morphing one leaf shape into another (Garg & Leow sec. 6).
+
+Examples::
+
+    leafview morph lanceolate reniform --frames 24 -o morph/
+    leafview morph assets/landmarks/asymmetric.toml cordate --ref obcordate:2 --ref oblong:1 -o m/
+    leafview morph elliptic deltoid --ref elliptic-extended-extended:4 --method keyframe -o key/
+
+Writes ``DIR/frame_000.png`` … (one shared camera), ``DIR/sheet.png`` (labelled contact sheet),
+``DIR/morph.json`` (each frame's leaf-space vector and fit error, the path's smoothness beside
+linear key-framing through the same references) and, with ``--presets``, each frame's Ω preset
+(an asymmetric frame is two one-sided leaves: ``frame_NNN.right.toml`` and ``.left.toml``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from leafview.atomic import atomic_output
+from leafview.botany.shapes import INSTANCE_TARGET
+from leafview.cli import _size as size
+from leafview.core.io import dumps_toml
+from leafview.errors import UsageError
+from leafview.export.images import contact_sheet, write_image
+from leafview.gpu.morph import load_morph_leaf, morph_sequence, parse_ref, render_sequence
+
+__all__ = ["add_arguments", "run"]
+
+_VIEWS = ("top", "front", "three-quarter", "side")
+MAX_FRAMES = 1000
+
+
+def _size(text: str) -> int:
+
+    return size(text)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = ("Morph leaf shape A into B along the NURBS path of Garg & Leow (eq. 11), pulled "
+                     "towards weighted reference shapes; each frame is fitted to the shader model and "
+                     "rendered. A, B and references are landmark leaf files (`landmarks = 1`, e.g. "
+                     "assets/landmarks/*.toml) or catalogue names (`leafview shapes` lists them).")
+    p.add_argument("source", metavar="A", help="source shape: landmark file or catalogue name")
+    p.add_argument("target", metavar="B", help="target shape: landmark file or catalogue name")
+    p.add_argument("--ref", action="append", default=[], metavar="C[:W]",
+                   help="reference shape with weight W >= 0 (default 1), in path order; repeatable")
+    p.add_argument("--frames", type=int, default=24, help="number of frames, ends included (default 24)")
+    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output directory")
+    p.add_argument("--size", type=_size, default=192, help="pixels per frame (default 192)")
+    p.add_argument("--view", choices=_VIEWS, default="top", help="camera (default top)")
+    p.add_argument("--method", choices=("nurbs", "keyframe"), default="nurbs",
+                   help="nurbs: eq. 11, frames evenly spaced along the path (default); keyframe: linear "
+                        "key-framing through the references (for comparison)")
+    p.add_argument("--fast", action="store_true", help="linear fit only (about 10x faster, a few %% off)")
+    p.add_argument("--presets", action="store_true", help="also write each frame's Ω preset (frame_NNN.toml)")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+
+
+def _output_dir(text: str) -> Path:
+    out = Path(text)
+    if out.suffix.lower() in (".png", ".tif", ".tiff", ".exr", ".jpg"):
+        raise UsageError(f"-o {out}: morph writes a directory of frames; give a directory name")
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"-o {out} exists and is not a directory")
+    return out
+
+
+def _warn_loose_fits(seq) -> None:
+    """Say which frames the shader model follows less closely than 1 % of the leaf length."""
+
+    loose = [i for i, e in enumerate(seq.errors) if e > INSTANCE_TARGET]
+    if not loose:
+        return
+    worst = max(seq.errors[i] for i in loose)
+    print(f"note: {len(loose)} frame(s) ({', '.join(map(str, loose[:8]))}{' ...' if len(loose) > 8 else ''}) "
+          f"fit the shader model to {100 * worst:.2f} % of the leaf length, above the {100 * INSTANCE_TARGET:g} % "
+          f"goal (--fast fits are looser)", file=sys.stderr)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+
+    if not 2 <= args.frames <= MAX_FRAMES:
+        raise UsageError(f"--frames must be between 2 and {MAX_FRAMES}, got {args.frames}")
+    out = _output_dir(args.output)
+    source = load_morph_leaf(args.source, "A")
+    target = load_morph_leaf(args.target, "B")
+    refs = []
+    for text in args.ref:
+        ref = parse_ref(text)
+        refs.append((load_morph_leaf(ref.spec, f"--ref {text}"), ref.weight))
+
+    t0 = time.perf_counter()
+    quiet = True if args.quiet else None
+    with tqdm(total=args.frames, unit="frame", desc="fitting frames", disable=quiet, file=sys.stderr) as bar:
+        seq = morph_sequence(source, target, refs, args.frames, method=args.method, polish=not args.fast,
+                             progress=bar.update)
+    t_fit = time.perf_counter() - t0
+    with tqdm(total=args.frames, unit="frame", desc="rendering", disable=quiet, file=sys.stderr) as bar:
+        images = render_sequence(seq.parts, args.size, args.view, progress=bar.update)
+    width = len(str(args.frames - 1))
+    labels = [f"{i:0{width}d}  t={t:.2f}" for i, t in enumerate(seq.t)]
+    sheet = contact_sheet(images, labels, columns=min(8, args.frames))
+
+    out.mkdir(parents=True, exist_ok=True)
+    for i, (img, parts) in enumerate(zip(images, seq.parts)):
+        stem = f"frame_{i:0{width}d}"
+        if len(parts) == 1:
+            write_image(out / f"{stem}.png", img, params=parts[0])
+        else:
+            write_image(out / f"{stem}.png", img, description=f"leafview morph frame {i}: asymmetric, "
+                        f"drawn as two one-sided leaves ({stem}.right.toml, {stem}.left.toml with --presets)")
+        if args.presets:
+            names = [f"{stem}.toml"] if len(parts) == 1 else [f"{stem}.right.toml", f"{stem}.left.toml"]
+            for fname, params in zip(names, parts):
+                with atomic_output(out / fname) as tmp:
+                    Path(tmp).write_text(dumps_toml(params), encoding="utf-8")
+    write_image(out / "sheet.png", sheet,
+                description=f"leafview morph {args.source} -> {args.target} ({args.method}, {args.frames} frames)")
+    summary = seq.summary() | {"source": args.source, "target": args.target,
+                               "refs": [{"spec": parse_ref(r).spec, "weight": parse_ref(r).weight} for r in args.ref]}
+    with atomic_output(out / "morph.json") as tmp:
+        Path(tmp).write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+
+    s, k = seq.smoothness, seq.keyframe_smoothness
+    print(f"wrote {args.frames} frames ({args.size}×{args.size}, {args.view} view), sheet.png and morph.json "
+          f"to {out}/ in {time.perf_counter() - t0:.1f} s (fits {t_fit:.1f} s)")
+    asym = sum(len(p) > 1 for p in seq.parts)
+    halves = f"; {asym} asymmetric frame(s) drawn as two one-sided leaves" if asym else ""
+    print(f"leaf space: {len(seq.space_names)} dimensions{halves}; frame fit error: largest "
+          f"{100 * max(seq.errors):.2f} %, median {100 * sorted(seq.errors)[len(seq.errors) // 2]:.2f} % "
+          f"of the leaf length")
+    print(f"{'smoothness over ' + str(args.frames) + ' frames':34s} {'max step':>9s} {'step max/mean':>14s} "
+          f"{'max turn (rad)':>15s}")
+    print(f"{'NURBS path (eq. 11, arc length)':34s} {s['max_step']:9.4f} {s['step_ratio']:14.3f} {s['max_turn']:15.3f}")
+    print(f"{'linear key-framing (same refs)':34s} {k['max_step']:9.4f} {k['step_ratio']:14.3f} {k['max_turn']:15.3f}")
+    _warn_loose_fits(seq)
+    if seq.reference_distances:
+        d = ", ".join(f"{x:.3f}" for x in seq.reference_distances)
+        print(f"distance from the path to each reference (leaf space): {d}")
+    return 0

@@ -1,0 +1,70 @@
+"""``leafview view [PRESET]``: argument checks and the run (called from :mod:`leafview.cli`).
+
+Bad input (an unknown preset, a malformed file, a bad ``--size`` or ``--screenshot`` name) is
+reported before any window opens, with exit code 2; no display or no OpenGL 4.5 exits 1 with
+what to install.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from leafview.app.viewer import open_state
+from leafview.app.window import ViewerWindow
+from leafview.cli import UsageError, int_in_range, int_pair
+from leafview.core.params import LeafParams
+from leafview.export.images import format_of
+from leafview.resources import builtin_presets, resolve_preset
+
+__all__ = ["add_arguments", "view_main", "window_size"]
+
+
+def window_size(text: str) -> tuple[int, int]:
+    """``WxH`` → (w, h), each 64..8192."""
+
+    return int_pair(text, lo=64, hi=8192, what="WIDTHxHEIGHT", example="1280x800")
+
+
+def _frames(text: str) -> int:
+
+    return int_in_range(text, lo=1, hi=None, what="frames", name="--frames")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``leafview view``."""
+    parser.add_argument("preset", nargs="?", default="ovate", metavar="PRESET",
+                        help="a .toml/.json preset or a built-in name (default: ovate)")
+    parser.add_argument("--size", type=window_size, default=(1280, 800), metavar="WxH",
+                        help="window size (default 1280x800)")
+    parser.add_argument("--frames", type=_frames, default=None, metavar="N",
+                        help="run N frames and exit (scripted runs, CI); no unsaved-edit question")
+    parser.add_argument("--screenshot", default=None, metavar="FILE",
+                        help="after the last frame, write the whole window (scene and panel) as PNG/TIFF")
+    parser.add_argument("--dev", action="store_true",
+                        help="hot-reload shaders/ when the files change (errors shown, old shaders kept)")
+    parser.add_argument("--samples", type=int, choices=(0, 2, 4, 8), default=None,
+                        help="multisampling of the scene (default 4; 0 on software renderers such as llvmpipe)")
+
+
+def view_main(args: argparse.Namespace) -> int:
+    """Run the viewer for parsed ``args``; returns the exit code."""
+
+    path = resolve_preset(args.preset)
+    if not path.exists() and not path.suffix:
+        raise UsageError(f"{args.preset}: no such file or built-in preset "
+                         f"(built-in: {', '.join(builtin_presets())})")
+    if path.is_dir():
+        raise UsageError(f"{path} is a directory: give one preset file or a built-in name")
+    if args.screenshot is not None:
+        fmt = format_of(args.screenshot)
+        if fmt not in ("png", "tif"):
+            raise UsageError(f"--screenshot {args.screenshot}: use a .png or .tif file name")
+        if Path(args.screenshot).is_dir():
+            raise UsageError(f"--screenshot {args.screenshot} is a directory; give a file name")
+    params = LeafParams.load(path)  # ParamError → exit 2, naming the file and field
+    state = open_state(params, path)
+
+
+    with ViewerWindow(state, args.size, dev=args.dev, samples=args.samples) as window:
+        return window.run(frames=args.frames, screenshot=args.screenshot)

@@ -1,0 +1,166 @@
+"""Reading and writing leaf presets as TOML (``schema = 1``) or JSON with the same structure,
+and the compact JSON form (:mod:`leafview.core.compact`): ``*.leaf.json`` files are written
+compact, and any JSON file whose top level has the ``leafview`` key is read as compact.
+
+Errors are :class:`~leafview.core.params.ParamError` naming the file and either ``line:col``
+(syntax) or the dotted field path (content).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from leafview.atomic import atomic_output
+from leafview.core import compact
+from leafview.core.params import LeafParams, ParamError, parse_params, register_file_io
+
+__all__ = ["load_params", "save_params", "dumps_toml", "read_document", "load_leaves", "save_leaves",
+           "leaves_from_document", "is_compact_path"]
+
+_FORMATS = {".toml": "toml", ".json": "json"}
+
+
+def _format_of(path: Path) -> str:
+    fmt = _FORMATS.get(path.suffix.lower())
+    if fmt is None:
+        raise ParamError("", f"unknown preset format {path.suffix!r} (use .toml or .json)", str(path))
+    return fmt
+
+
+def read_document(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Parse a preset file into a dict, reporting syntax errors with ``file:line:col``."""
+    p = Path(path)
+    fmt = _format_of(p)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ParamError("", "no such file", str(p)) from None
+    except IsADirectoryError:
+        raise ParamError("", "is a directory, expected a preset file", str(p)) from None
+    except UnicodeDecodeError as exc:
+        raise ParamError("", f"not UTF-8 text ({exc.reason} at byte {exc.start})", str(p)) from None
+    except OSError as exc:
+        raise ParamError("", f"cannot read: {exc.strerror}", str(p)) from None
+    if not text.strip():
+        raise ParamError("", "empty file: expected 'schema' and a [shape] table", str(p))
+    if fmt == "toml":
+        try:
+            return tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            line, col = _toml_position(str(exc))
+            msg = str(exc).split(" (at ")[0]
+            raise ParamError("", f"TOML syntax error: {msg}", f"{p}:{line}:{col}") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ParamError("", f"JSON syntax error: {exc.msg}", f"{p}:{exc.lineno}:{exc.colno}") from None
+    return data
+
+
+def _toml_position(message: str) -> tuple[int, int]:
+    # tomllib reports "... (at line L, column C)" or "(at end of document)"
+    import re
+
+    m = re.search(r"line (\d+), column (\d+)", message)
+    return (int(m.group(1)), int(m.group(2))) if m else (0, 0)
+
+
+def _stem(p: Path) -> str:
+    name = p.name
+    for suffix in (".leaf.json", ".leaves.json"):
+        if name.lower().endswith(suffix):
+            return name[: -len(suffix)]
+    return p.stem
+
+
+def is_compact_path(path: str | os.PathLike[str]) -> bool:
+    """Whether ``path`` names a compact leaf file (``*.leaf.json``), which :func:`save_params`
+    writes in the compact form."""
+    return Path(path).name.lower().endswith(".leaf.json")
+
+
+def load_params(path: str | os.PathLike[str]) -> LeafParams:
+    """Load and validate a preset (full TOML/JSON or compact JSON); the file name becomes
+    ``name`` when the file has none."""
+    p = Path(path)
+    data = read_document(p)
+    if _is_leaf_set(data):
+        n = len(data["leaves"]) if isinstance(data["leaves"], list) else "?"
+        raise ParamError("leaves", f"a leaf set of {n} leaves, not one leaf: read it with "
+                                   "leafview.core.io.load_leaves (or leafview render)", str(p))
+    return leaves_from_document(data, p)[0]
+
+
+def _is_leaf_set(data: Any) -> bool:
+    return compact.is_compact(data) and "leaves" in data
+
+
+def leaves_from_document(data: Any, path: str | os.PathLike[str]) -> list[LeafParams]:
+    """The validated leaves of a parsed leaf file (full, compact or leaf set) read from ``path``
+    (named in errors; its stem names unnamed leaves: ``<stem>``, or ``<stem>-<i>`` in a set)."""
+    p = Path(path)
+    try:
+        if _is_leaf_set(data):
+            leaves = compact.parse_leaves(data)
+            return [leaf if leaf.name else leaf.replace(name=f"{_stem(p)}-{i}") for i, leaf in enumerate(leaves)]
+        params = compact.parse_compact(data) if compact.is_compact(data) else parse_params(data)
+    except ParamError as exc:
+        raise exc.with_source(str(p)) from None
+    return [params if params.name else params.replace(name=_stem(p))]
+
+
+def load_leaves(path: str | os.PathLike[str]) -> list[LeafParams]:
+    """The leaves of a file: every leaf of a leaf set (``{"leafview":1,"leaves":[...]}``), or the
+    one leaf of any other leaf file."""
+    return leaves_from_document(read_document(path), path)
+
+
+def save_leaves(leaves: list[LeafParams], path: str | os.PathLike[str], *, digits: int | None = None) -> None:
+    """Write a compact leaf set (``.json``, conventionally ``*.leaves.json``) atomically."""
+    p = Path(path)
+    if p.suffix.lower() != ".json":
+        raise ParamError("", f"a leaf set is JSON: expected a .leaves.json file name, got {p.suffix!r}", str(p))
+    if not leaves:
+        raise ParamError("leaves", "nothing to write: the leaf set is empty", str(p))
+    text = compact.dumps_leaves(leaves, digits=digits) + "\n"
+    with atomic_output(p) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def dumps_toml(params: LeafParams) -> str:
+    return tomli_w.dumps(params.to_dict())
+
+
+def save_params(params: LeafParams, path: str | os.PathLike[str], *, digits: int | None = None) -> None:
+    """Write ``params`` to ``path`` atomically: ``.toml``, ``.json`` (the full form) or
+    ``.leaf.json`` (the compact form; ``digits`` rounds its floats, see
+    :mod:`leafview.core.compact`)."""
+    p = Path(path)
+    fmt = _format_of(p)
+    if is_compact_path(p):
+        text = compact.dumps(params, digits=digits) + "\n"
+    elif digits is not None:
+        raise ParamError("digits", f"only the compact form (.leaf.json) rounds numbers, not {p.name}", str(p))
+    else:
+        text = dumps_toml(params) if fmt == "toml" else json.dumps(params.to_dict(), indent=2) + "\n"
+    with atomic_output(p) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+class _LeafFiles:
+    """The file reader and writer behind :meth:`LeafParams.load` and :meth:`LeafParams.save`."""
+
+    def load(self, path: str | os.PathLike[str]) -> LeafParams:
+        return load_params(path)
+
+    def save(self, params: LeafParams, path: str | os.PathLike[str], *, digits: int | None = None) -> None:
+        save_params(params, path, digits=digits)
+
+
+register_file_io(_LeafFiles())

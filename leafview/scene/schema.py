@@ -1,0 +1,162 @@
+"""The JSON Schema of a scene file, and the published copies of every leafview schema.
+
+:func:`scene_schema` describes a scene recipe (:mod:`leafview.scene.spec`) whose species are
+compact or full leaf tables (the schemas of :mod:`leafview.core.schema`) and whose ``[plant]``
+bounds come from :data:`~leafview.scene.plants.PLANT_RANGES`. It cannot say that
+``leaves = 10.0`` is refused (the loader wants whole numbers).
+
+The published copies are ``assets/schema/{leaf,leaf-compact,scene}.schema.json`` (shipped in
+the wheel under ``leafview/assets/schema/``). Regenerate them after a parameter change with
+``python -m leafview.scene.schema --write``; ``--check`` exits 1 when a file is stale.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from leafview.atomic import atomic_output
+from leafview.core.schema import DIALECT, compact_leaf_schema, compact_schema, doc_line, leaf_schema
+from leafview.resources import asset_dir
+from leafview.scene import spec as S
+from leafview.scene.plants import PHYLLOTAXIS, PLANT_RANGES, PlantSpec
+
+__all__ = ["SCHEMAS", "main", "published_path", "scene_schema", "schema_text"]
+
+
+def _plant_schema() -> dict[str, Any]:
+
+    default = PlantSpec()
+    props: dict[str, Any] = {
+        "phyllotaxis": {"enum": list(PHYLLOTAXIS), "default": default.phyllotaxis},
+        "light": {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3,
+                  "not": {"items": {"const": 0}}, "default": list(default.light),
+                  "description": "direction towards the light (normalised on load), not the zero vector"},
+    }
+    for name, (lo, hi, open_lo, integer) in PLANT_RANGES.items():
+        entry: dict[str, Any] = {"type": "integer" if integer else "number"}
+        if lo is not None:
+            entry["exclusiveMinimum" if open_lo else "minimum"] = lo
+        if hi is not None:
+            entry["maximum"] = hi
+        entry["default"] = getattr(default, name)
+        props[name] = entry
+    return {"type": "object", "description": doc_line(PlantSpec), "properties": props,
+            "additionalProperties": False}
+
+
+def scene_schema() -> dict[str, Any]:
+    """The JSON Schema of a scene file (:class:`leafview.scene.spec.SceneSpec`)."""
+
+    spec_fields = S.SceneSpec.__dataclass_fields__
+    full_leaf = copy.deepcopy(leaf_schema())
+    for key in ("$schema", "$id", "title"):
+        full_leaf.pop(key)
+    full_leaf["required"] = [k for k in full_leaf["required"] if k != "schema"]
+    full_leaf["description"] = "the full leaf parameter table (schema may be left out; transform is ignored)"
+    compact = compact_schema()["$defs"]
+    scene_props = {
+        "layout": {"enum": list(S.LAYOUTS), "default": spec_fields["layout"].default},
+        "leaves": {"type": "integer", "minimum": 1, "maximum": S.MAX_LEAVES, "default": spec_fields["leaves"].default},
+        "seed": {"type": "integer", "minimum": 0, "maximum": 2**63 - 1, "default": spec_fields["seed"].default},
+        "plants": {"type": "integer", "minimum": 0, "maximum": 1_000_000, "default": spec_fields["plants"].default,
+                   "description": "0: chosen from the leaf count"},
+        "variation": {"type": "number", "minimum": 0, "maximum": 0.5, "default": spec_fields["variation"].default,
+                      "description": "± fraction of each Ω component per leaf"},
+        "colour_variation": {"type": "number", "minimum": 0, "maximum": 0.5,
+                             "default": spec_fields["colour_variation"].default},
+        "stems": {"type": "boolean", "default": spec_fields["stems"].default},
+        "name": {"type": "string"},
+    }
+    species = {
+        "type": "object",
+        "properties": {
+            "weight": {"type": "number", "exclusiveMinimum": 0, "default": 1.0,
+                       "description": "relative frequency per plant"},
+            "leaf": {"anyOf": [{"$ref": "#/$defs/compactLeaf"}, {"$ref": "#/$defs/fullLeaf"}]},
+            "preset": {"type": "string", "minLength": 1,
+                       "description": "a built-in preset name or a path relative to the scene file"},
+        },
+        "oneOf": [{"required": ["leaf"]}, {"required": ["preset"]}],
+        "additionalProperties": False,
+    }
+    return {
+        "$schema": DIALECT,
+        "$id": f"urn:leafview:schema:scene:{S.SCENE_SCHEMA}",
+        "title": "leafview scene",
+        "description": ("A scene recipe: layout, leaf count, seed and species with weights; leafview expands it "
+                        "deterministically into per-leaf parameters and placements (leafview.scene.spec). "
+                        "Stored as TOML or JSON."),
+        "type": "object",
+        "properties": {
+            "schema": {"const": S.SCENE_SCHEMA, "description": "file format version"},
+            "scene": {"type": "object", "properties": scene_props, "additionalProperties": False},
+            "species": {"type": "array", "minItems": 1, "items": {"$ref": "#/$defs/species"}},
+            "plant": _plant_schema(),
+        },
+        "required": ["schema", "species"],
+        "additionalProperties": False,
+        "$defs": {
+            "species": species,
+            "compactLeaf": compact_leaf_schema("optional"),
+            "omega": compact["omega"],
+            "fullLeaf": full_leaf,
+        },
+    }
+
+
+# published file name -> generator
+SCHEMAS = {"leaf.schema.json": leaf_schema, "leaf-compact.schema.json": compact_schema,
+           "scene.schema.json": scene_schema}
+
+
+def schema_text(name: str = "leaf.schema.json") -> str:
+    """A schema as the published file holds it (2-space JSON, UTF-8, final newline)."""
+    return json.dumps(SCHEMAS[name](), indent=2, ensure_ascii=False) + "\n"
+
+
+def published_path(name: str = "leaf.schema.json") -> Path:
+    """``assets/schema/<name>`` (in the checkout, or inside the installed wheel)."""
+
+    return asset_dir() / "schema" / name
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m leafview.scene.schema",
+                                     description="Print, check or rewrite the published JSON Schemas "
+                                                 f"({', '.join(SCHEMAS)}).")
+    parser.add_argument("name", nargs="?", choices=tuple(SCHEMAS), default="leaf.schema.json",
+                        help="the schema to print (default leaf.schema.json)")
+    group = parser.add_mutually_exclusive_group()
+    group.add_argument("--write", action="store_true", help="rewrite every file in assets/schema/")
+    group.add_argument("--check", action="store_true", help="exit 1 if a published file is stale")
+    args = parser.parse_args(argv)
+    if args.write:
+
+        for name in SCHEMAS:
+            path = published_path(name)
+            with atomic_output(path) as tmp:
+                tmp.write_text(schema_text(name), encoding="utf-8")
+            print(f"wrote {path}")
+        return 0
+    if args.check:
+        stale = 0
+        for name in SCHEMAS:
+            path = published_path(name)
+            current = path.read_text(encoding="utf-8") if path.exists() else ""
+            if current != schema_text(name):
+                print(f"{path} is stale: run python -m leafview.scene.schema --write", file=sys.stderr)
+                stale += 1
+            else:
+                print(f"{path} is up to date")
+        return 1 if stale else 0
+    sys.stdout.write(schema_text(args.name))
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,406 @@
+"""Scenes of many leaves: what a scene file holds and the per-leaf arrays it expands to.
+
+A scene is stored as a recipe, not as a list of leaves (:class:`SceneSpec`, a TOML or JSON file
+with ``schema = 1``): the layout (one plant, a field or a hedge of plants, see
+:mod:`leafview.scene.plants`), the leaf count, a seed, the species (each a leaf parameter
+table, written in the compact form of :mod:`leafview.core.compact`, so a file is
+self-contained) with weights, and how much leaves vary within a species.
+:func:`build_scene` expands it deterministically into a :class:`Scene`: per-leaf arrays that the
+GPU path packs into one storage-buffer row per leaf.
+
+Variation within a species (seed 001 sec. 4 uses up to ±20 %): every leaf gets its own factors
+``f ∈ [1 - variation, 1 + variation]``, one per Ω component (:data:`VARIED`), multiplying the
+species' value; ``v̄`` positions stay inside (0, 1). The leaf colour is multiplied by
+``1 ± colour_variation`` (one factor per leaf). Each plant takes one species, drawn by weight.
+
+Bending in scenes: the cantilever solve (seed 002 eq. 4) runs once per species, in the species'
+own rest frame, and every leaf of that species carries that droop (a per-leaf solve costs about a
+millisecond, too much for 10⁶ leaves). A leaf whose shape factors differ from 1 therefore droops
+like its species, not exactly as its own solve would give; :func:`bend_deviation` measures it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from leafview.atomic import atomic_output
+from leafview.core.compact import compact_dict, parse_compact
+from leafview.core.io import read_document
+from leafview.core.params import Bending, LeafParams, ParamError, Shape, Transform, parse_params
+from leafview.deform.beam import bend_profile
+from leafview.deform.surface import evaluate, grid_uv, partials
+from leafview.resources import resolve_preset
+from leafview.scene.plants import PlantSpec, scatter
+
+__all__ = ["SceneSpec", "Scene", "build_scene", "load_scene", "save_scene", "scene_from_leaves", "LAYOUTS", "VARIED",
+           "MAX_LEAVES", "vary_shape", "evaluate_leaf", "bend_deviation"]
+
+LAYOUTS = ("plant", "field", "hedge")
+MAX_LEAVES = 10_000_000           # refused above this (the host arrays alone would pass 10 GB)
+SCENE_SCHEMA = 1
+
+# Ω components that vary per leaf (column order of Scene.factors)
+VARIED = ("a1.x", "a1.y", "a1.z", "a2.x", "a2.y", "a2.z",
+          "vbar1", "xs1", "zs1", "vbar2", "xs2", "zs2", "vbar3", "xs3", "zs3",
+          "zf1", "zf2", "zf3", "zg1", "zg2", "zg3")
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """The recipe of a scene (the content of a scene file).
+
+    ``species``: leaf parameters (their transform is ignored: placement comes from the layout)
+    and ``weights`` (relative frequency per plant). ``plant``: keyword arguments of
+    :class:`leafview.scene.plants.PlantSpec` (phyllotaxis, height, branches, ...).
+    """
+
+    species: tuple[LeafParams, ...]
+    weights: tuple[float, ...] = ()
+    layout: str = "field"
+    leaves: int = 10_000
+    seed: int = 0
+    plants: int = 0                 # 0: chosen from the leaf count
+    variation: float = 0.2          # ± fraction per Ω component
+    colour_variation: float = 0.1   # ± fraction of the leaf colour
+    stems: bool = True
+    plant: Mapping[str, Any] = field(default_factory=dict)
+    name: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.species:
+            raise ParamError("species", "a scene needs at least one species")
+        weights = self.weights or (1.0,) * len(self.species)
+        if len(weights) != len(self.species):
+            raise ParamError("species", f"{len(weights)} weights for {len(self.species)} species")
+        for i, w in enumerate(weights):
+            if not (math.isfinite(w) and w > 0):
+                raise ParamError(f"species[{i}].weight", f"must be a positive number, got {w!r}")
+        object.__setattr__(self, "weights", tuple(float(w) for w in weights))
+        if self.layout not in LAYOUTS:
+            raise ParamError("scene.layout", f"unknown layout {self.layout!r} (use {', '.join(LAYOUTS)})")
+        _check_int("scene.leaves", self.leaves, 1, MAX_LEAVES)
+        _check_int("scene.seed", self.seed, 0, 2**63 - 1)
+        _check_int("scene.plants", self.plants, 0, 1_000_000)
+        for key, hi in (("variation", 0.5), ("colour_variation", 0.5)):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= hi:
+                raise ParamError(f"scene.{key}", f"must be a number in [0, {hi}], got {value!r}")
+        if not isinstance(self.stems, bool):
+            raise ParamError("scene.stems", f"must be true or false, got {self.stems!r}")
+        self.plant_spec()  # validates [plant]
+
+    def plant_spec(self) -> Any:
+        """The :class:`~leafview.scene.plants.PlantSpec` of ``[plant]`` (validated)."""
+
+        known = {f.name for f in fields(PlantSpec)}
+        for key in self.plant:
+            if key not in known:
+                raise ParamError(f"plant.{key}", f"unknown setting (known: {', '.join(sorted(known))})")
+        try:
+            return PlantSpec(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in self.plant.items()})
+        except ParamError as exc:
+            path = exc.path if exc.path.startswith("plant") else f"plant.{exc.path}".rstrip(".")
+            raise ParamError(path, exc.message) from None
+        except (TypeError, ValueError) as exc:
+            raise ParamError("plant", str(exc)) from None
+
+    def replace(self, **changes: Any) -> SceneSpec:
+        return replace(self, **changes)
+
+    # -- the file form ---------------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        scene: dict[str, Any] = {"layout": self.layout, "leaves": self.leaves, "seed": self.seed,
+                                 "plants": self.plants, "variation": self.variation,
+                                 "colour_variation": self.colour_variation, "stems": self.stems}
+        if self.name:
+            scene["name"] = self.name
+
+        species = [{"weight": w, "leaf": compact_dict(leaf.replace(transform=Transform()), version=False)}
+                   for leaf, w in zip(self.species, self.weights)]
+        out: dict[str, Any] = {"schema": SCENE_SCHEMA, "scene": scene, "species": species}
+        if self.plant:
+            out["plant"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.plant.items()}
+        return out
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], *, base: Path | None = None) -> SceneSpec:
+        """Validate a scene document. A species is ``{leaf = {...}}`` (inline parameters, full or
+        compact: :mod:`leafview.core.compact`) or
+        ``{preset = "name or path"}`` (resolved against ``base``, the file's folder)."""
+        if not isinstance(data, Mapping):
+            raise ParamError("", "expected a table at the top level")
+        unknown = set(data) - {"schema", "scene", "species", "plant"}
+        if unknown:
+            raise ParamError(sorted(unknown)[0], "unknown table (expected schema, scene, species, plant)")
+        if data.get("schema") != SCENE_SCHEMA:
+            raise ParamError("schema", f"expected schema = {SCENE_SCHEMA}, got {data.get('schema')!r}")
+        scene = data.get("scene", {})
+        if not isinstance(scene, Mapping):
+            raise ParamError("scene", "must be a table")
+        keys = {"layout", "leaves", "seed", "plants", "variation", "colour_variation", "stems", "name"}
+        for key in scene:
+            if key not in keys:
+                raise ParamError(f"scene.{key}", f"unknown setting (known: {', '.join(sorted(keys))})")
+        raw_species = data.get("species")
+        if not isinstance(raw_species, list) or not raw_species:
+            raise ParamError("species", "expected a non-empty list of [[species]] tables")
+        species, weights = [], []
+        for i, item in enumerate(raw_species):
+            where = f"species[{i}]"
+            if not isinstance(item, Mapping):
+                raise ParamError(where, "must be a table")
+            extra = set(item) - {"leaf", "preset", "weight"}
+            if extra:
+                raise ParamError(f"{where}.{sorted(extra)[0]}", "unknown key (expected leaf, preset, weight)")
+            if ("leaf" in item) == ("preset" in item):
+                raise ParamError(where, "give exactly one of 'leaf' (a parameter table) or 'preset'")
+            if "preset" in item:
+                species.append(_load_preset(item["preset"], base, where))
+            else:
+                species.append(_species_leaf(item["leaf"], f"{where}.leaf"))
+            weight = item.get("weight", 1.0)
+            if isinstance(weight, bool) or not isinstance(weight, (int, float)):
+                raise ParamError(f"{where}.weight", f"must be a positive number, got {weight!r}")
+            weights.append(weight)
+        plant = data.get("plant", {})
+        if not isinstance(plant, Mapping):
+            raise ParamError("plant", "must be a table")
+        defaults = cls.__dataclass_fields__
+        return cls(species=tuple(species), weights=tuple(weights),
+                   layout=scene.get("layout", defaults["layout"].default),
+                   leaves=scene.get("leaves", defaults["leaves"].default),
+                   seed=scene.get("seed", defaults["seed"].default),
+                   plants=scene.get("plants", defaults["plants"].default),
+                   variation=scene.get("variation", defaults["variation"].default),
+                   colour_variation=scene.get("colour_variation", defaults["colour_variation"].default),
+                   stems=scene.get("stems", defaults["stems"].default),
+                   plant=dict(plant), name=str(scene.get("name", "")))
+
+
+def _species_leaf(table: Any, where: str) -> LeafParams:
+    """A species' inline leaf: the compact form (it has ``omega``) or the full parameter table
+    (``schema`` may be left out)."""
+
+    if isinstance(table, Mapping) and "omega" in table:
+        return parse_compact(table, where=where, version="leafview" in table)
+    if isinstance(table, Mapping):
+        table = {"schema": 1, **table}
+    try:
+        return parse_params(table)
+    except ParamError as exc:
+        raise ParamError(f"{where}.{exc.path}".rstrip("."), exc.message) from None
+
+
+def _check_int(path: str, value: Any, lo: int, hi: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ParamError(path, f"must be a whole number, got {value!r}")
+    if not lo <= value <= hi:
+        raise ParamError(path, f"must be in {lo}..{hi:,}, got {value:,}")
+
+
+def _load_preset(spec: Any, base: Path | None, where: str) -> LeafParams:
+
+    if not isinstance(spec, str) or not spec:
+        raise ParamError(f"{where}.preset", "must be a preset name or a path")
+    path = Path(spec)
+    if base is not None and not path.is_absolute() and (base / path).exists():
+        path = base / path
+    else:
+        path = resolve_preset(spec)
+    if not path.exists():
+        raise ParamError(f"{where}.preset", f"no such preset file or built-in name: {spec!r}")
+    return LeafParams.load(path)
+
+
+def load_scene(path: str | os.PathLike[str]) -> SceneSpec:
+    """Read a scene file (``.toml`` or ``.json``); errors name the file and field or line."""
+
+    p = Path(path)
+    data = read_document(p)
+    try:
+        return SceneSpec.from_dict(data, base=p.parent)
+    except ParamError as exc:
+        raise exc.with_source(str(p)) from None
+
+
+def save_scene(spec: SceneSpec, path: str | os.PathLike[str]) -> None:
+    """Write ``spec`` atomically as TOML or JSON (self-contained: species inline)."""
+    import tomli_w
+
+
+    p = Path(path)
+    if p.suffix.lower() not in (".toml", ".json"):
+        raise ParamError("", f"unknown scene format {p.suffix!r} (use .toml or .json)", str(p))
+    data = spec.to_dict()
+    text = tomli_w.dumps(data) if p.suffix.lower() == ".toml" else json.dumps(data, indent=2) + "\n"
+    with atomic_output(p) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+# -- the expanded scene ----------------------------------------------------------------------
+def vary_shape(shape: Shape, factors: NDArray[np.floating]) -> Shape:
+    """``shape`` with each Ω component of :data:`VARIED` multiplied by its factor; ``v̄`` clamped
+    to [0.02, 0.98]. The vectorised twin for GPU records is
+    :func:`leafview.gpu.scene.pack_scene` (a test checks they agree)."""
+    f = np.asarray(factors, np.float64)
+    a1 = tuple(float(x) for x in np.asarray(shape.a1) * f[0:3])
+    a2 = tuple(float(x) for x in np.asarray(shape.a2) * f[3:6])
+    rows = []
+    for k, (vb, xs, zs) in enumerate(shape.silhouette[:3]):
+        g = f[6 + 3 * k: 9 + 3 * k]
+        rows.append((float(np.clip(vb * g[0], 0.02, 0.98)), float(xs * g[1]), float(zs * g[2])))
+    rows += [tuple(r) for r in shape.silhouette[3:]]
+    # rows beyond the paper's three (an extended silhouette) keep their species' values
+    zf = tuple(float(x) for x in np.asarray(shape.zf[:3]) * f[15:18]) + tuple(shape.zf[3:])
+    zg = tuple(float(x) for x in np.asarray(shape.zg[:3]) * f[18:21]) + tuple(shape.zg[3:])
+    return replace(shape, a1=a1, a2=a2, silhouette=tuple(rows), zf=zf, zg=zg)
+
+
+@dataclass
+class Scene:
+    """Per-leaf arrays of an expanded scene (``N`` leaves).
+
+    Attributes
+    ----------
+    spec: the recipe.
+    species: the species parameters with an identity transform.
+    species_id: (N,) int32, the species of each leaf.
+    factors: (N, 21) float32 Ω factors (:data:`VARIED` order); all ones without variation.
+    tint: (N,) float32 colour factor.
+    matrices: (N, 4, 4) float64 leaf space -> world (column vectors), +z up.
+    stems: branch geometry (positions, normals, triangle indices) or None.
+    placement: the :class:`~leafview.scene.plants.Placement` it came from (None for a scene of
+        explicit leaves, :func:`scene_from_leaves`).
+    """
+
+    spec: SceneSpec
+    species: tuple[LeafParams, ...]
+    species_id: NDArray[np.int32]
+    factors: NDArray[np.float32]
+    tint: NDArray[np.float32]
+    matrices: NDArray[np.float64]
+    stems: tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.uint32]] | None
+    placement: Any
+
+    def __len__(self) -> int:
+        return int(self.species_id.shape[0])
+
+    @property
+    def varied(self) -> bool:
+        """Whether leaves differ from their species (shape or colour)."""
+        return self.spec.variation > 0 or self.spec.colour_variation > 0
+
+    @property
+    def shape_ids(self) -> NDArray[np.int32]:
+        """Index into :meth:`shapes` of each leaf: leaves with the same id share one mesh."""
+        return self.species_id if not self.varied else np.arange(len(self), dtype=np.int32)
+
+    def shapes(self) -> list[LeafParams]:
+        """The distinct leaf shapes (identity transform): the species when nothing varies, else
+        one per leaf."""
+        if not self.varied:
+            return list(self.species)
+        return [self.leaf(i) for i in range(len(self))]
+
+    def leaf(self, i: int) -> LeafParams:
+        """Leaf ``i``'s own parameters in its leaf space (identity transform; place it with
+        ``matrices[i]``). Its bending is the species' (see the module docstring)."""
+        sp = self.species[int(self.species_id[i])]
+        t = float(self.tint[i])
+        mat = sp.material
+        mat = replace(mat, front=tuple(float(min(max(c * t, 0.0), 1.0)) for c in mat.front),
+                      back=tuple(float(min(max(c * t, 0.0), 1.0)) for c in mat.back))
+        return sp.replace(shape=vary_shape(sp.shape, self.factors[i]), material=mat,
+                          name=f"{sp.name or 'leaf'}_{i}")
+
+    def placed_leaf(self, i: int) -> LeafParams:
+        """Leaf ``i`` as a stand-alone leaf: :meth:`leaf` with ``matrices[i]`` as its transform and
+        no name (what a leaf set, :mod:`leafview.core.compact`, stores per leaf)."""
+        return self.leaf(i).replace(transform=Transform.from_matrix(self.matrices[i]), name="")
+
+    def placed_leaves(self, progress: Any = None) -> list[LeafParams]:
+        """Every :meth:`placed_leaf`, in order (``progress(1)`` after each, e.g. a tqdm update)."""
+        out = []
+        for i in range(len(self)):
+            out.append(self.placed_leaf(i))
+            if progress is not None:
+                progress(1)
+        return out
+
+    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Axis-aligned world box (lo, hi) of the leaf bases and stems (a camera framing hint)."""
+        pts = self.matrices[:, :3, 3]
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        size = float(np.linalg.norm(self.matrices[:, :3, 0], axis=1).max(initial=0.0))
+        return lo - size, hi + size
+
+
+def build_scene(spec: SceneSpec) -> Scene:
+    """Expand ``spec`` (deterministic: the same spec gives the same arrays)."""
+
+    placement = scatter(spec.layout, spec.leaves, spec.seed, spec.plant_spec(),
+                        plants=spec.plants or None, stems=spec.stems)
+    n = len(placement)
+    rng = np.random.default_rng([spec.seed, 0x5CE4E])
+    n_plants = int(placement.plant.max(initial=-1)) + 1
+    p = np.asarray(spec.weights) / sum(spec.weights)
+    plant_species = rng.choice(len(spec.species), size=max(n_plants, 1), p=p).astype(np.int32)
+    species_id = plant_species[placement.plant]
+    factors = np.ones((n, len(VARIED)), np.float32)
+    if spec.variation > 0:
+        factors = (1.0 + spec.variation * rng.uniform(-1.0, 1.0, (n, len(VARIED)))).astype(np.float32)
+    tint = np.ones(n, np.float32)
+    if spec.colour_variation > 0:
+        tint = (1.0 + spec.colour_variation * rng.uniform(-1.0, 1.0, n)).astype(np.float32)
+    species = tuple(s.replace(transform=Transform()) for s in spec.species)
+    return Scene(spec, species, species_id.astype(np.int32), factors, tint,
+                 np.asarray(placement.matrices, np.float64), placement.stems, placement)
+
+
+def scene_from_leaves(leaves: Sequence[LeafParams], name: str = "") -> Scene:
+    """A scene of explicit, placed leaves (a leaf set, :mod:`leafview.core.compact`): each leaf
+    is its own species, drawn once at its own transform, without variation or stems. Its
+    per-species work (bend solve, culling sphere) therefore runs once per leaf."""
+    if not leaves:
+        raise ParamError("leaves", "a scene needs at least one leaf")
+    species = tuple(leaf.replace(transform=Transform()) for leaf in leaves)
+    spec = SceneSpec(species=species, leaves=len(leaves), variation=0.0, colour_variation=0.0, stems=False,
+                     name=name)
+    n = len(leaves)
+    matrices = np.stack([leaf.transform.matrix() for leaf in leaves]).astype(np.float64)
+    return Scene(spec, species, np.arange(n, dtype=np.int32), np.ones((n, len(VARIED)), np.float32),
+                 np.ones(n, np.float32), matrices, None, None)
+
+
+def evaluate_leaf(scene: Scene, i: int, u: NDArray[np.floating], v: NDArray[np.floating]) -> NDArray[np.float64]:
+    """Leaf-space points of leaf ``i`` as the scene draws it: its own shape, jitter and ripples,
+    bent by its species' cantilever profile (the numpy reference of the GPU rows)."""
+
+    own = scene.leaf(int(i))
+    if not own.bending.active:
+        return partials(own, u, v).L
+    sp = scene.species[int(scene.species_id[i])]
+    return partials(own.replace(bending=Bending()), u, v, bend=bend_profile(sp)).L
+
+
+def bend_deviation(scene: Scene, sample: Sequence[int]) -> float:
+    """Largest distance (in leaf lengths) between a bent leaf with its own cantilever solve and
+    with its species' profile (what the GPU draws), over the leaves in ``sample``."""
+
+    uv = grid_uv(9, 17).astype(np.float64)
+    worst = 0.0
+    for i in sample:
+        own = scene.leaf(int(i))
+        if own.bending.active:
+            drawn = evaluate_leaf(scene, int(i), uv[:, 0], uv[:, 1])
+            worst = max(worst, float(np.abs(evaluate(own, uv[:, 0], uv[:, 1]) - drawn).max()))
+    return worst
