@@ -1,4 +1,4 @@
-// Bézier curves in Bernstein form (seed 004, eq. 1) and their derivatives.
+// Bézier curves in Bernstein form (Chaurasia & Beardsley 2017, eq. 1) and their derivatives.
 // numpy reference: leafview/core/bezier.py
 #ifndef LEAFVIEW_BEZIER_GLSL
 #define LEAFVIEW_BEZIER_GLSL

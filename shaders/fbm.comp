@@ -1,5 +1,5 @@
 #version 450
-// Batched fBm synthesis (seed 002 sec. 3, eqs 1-2): one work group per signal. Each signal has
+// Batched fBm synthesis (Geng, Hu & Zhang 2014 sec. 3, eqs 1-2): one work group per signal. Each signal has
 // a seed, beta and length n (even, <= 2048) and is written, normalised to zero mean and unit
 // standard deviation, to signals[offset .. offset + n). numpy reference: leafview/deform/fbm.py.
 layout(local_size_x = 64) in;

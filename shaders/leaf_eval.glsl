@@ -1,4 +1,4 @@
-// The leaf surface L_Ω(u, v) of seed 004 sec. 3 (eqs 2-6), its partial derivatives and normal,
+// The leaf surface L_Ω(u, v) of Chaurasia & Beardsley 2017 sec. 3 (eqs 2-6), its partial derivatives and normal,
 // plus the jittered silhouette of sec. 6.
 // Shader permutations: LEAF_NO_JITTER, LEAF_NO_RIPPLE, LEAF_NO_BEND and LEAF_NO_EXTENDED (and
 // LEAF_NO_HALF in leaf.vert) compile the feature out when no leaf of a draw uses it
@@ -33,7 +33,7 @@ vec2 tip_taper(float v) {
     return vec2(1.0 - w3 * w, -8.0 * w3);
 }
 
-// Rippled margin (seed 002 eq. 5): D = tau(v) r(v) c(|u|) z, r = P [lambda + (1 - lambda) N(k veins v
+// Rippled margin (Geng, Hu & Zhang 2014 eq. 5): D = tau(v) r(v) c(|u|) z, r = P [lambda + (1 - lambda) N(k veins v
 // + theta)], c(s) = s^2 (3 - s) / 2 the small-deflection shape of a tip-loaded cantilever (the
 // secondary vein from the midrib). numpy reference: leafview/deform/surface.py, _add_ripple.
 void add_ripple(float sigma, float s, float v, inout LeafEval e) {
@@ -70,7 +70,7 @@ vec4 bend_sample(int i) {
     return LEAF.bend[i];
 }
 
-// Midrib bend and twist (seed 002 secs 4, 5.2.2): p' = A + Delta(v) + R(v) (p - A), R = R_N(Phi(v))
+// Midrib bend and twist (Geng, Hu & Zhang 2014 secs 4, 5.2.2): p' = A + Delta(v) + R(v) (p - A), R = R_N(Phi(v))
 // R_y(alpha v), Delta and Phi Catmull-Rom through the host's bend samples. numpy reference:
 // leafview/deform/surface.py, _bend, and leafview/deform/beam.py, sample_clamped.
 void apply_bend(float v, vec3 Av, vec3 dAv, inout LeafEval e) {

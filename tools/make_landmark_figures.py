@@ -1,4 +1,4 @@
-"""Regenerate docs/images/landmark_*.png: margins of the landmark model (seed 001) drawn as
+"""Regenerate docs/images/landmark_*.png: margins of the landmark model (Garg & Leow 2011) drawn as
 polylines with matplotlib (no OpenGL): the catalogue (Table 1, Figs 4-5), the fit (Fig. 1b),
 variation (Figs 6, 8) and morphing (Figs 10-11). Run from the repository root; prints the
 smoothness figures quoted in docs/shapes.md."""

@@ -26,7 +26,7 @@ P("asymmetric", [(0.2, 0.36), (0.5, 0.42), (0.8, 0.3)], a1=(0.14, 1/3, 0), a2=(0
 P("serrate", [(0.18, 0.42), (0.5, 0.42), (0.8, 0.26)], zf=(0.01,0.015,0.01), zg=(0.015,0.02,0.015), jitter={"amplitude": 0.025, "density": 40.0, "seed": 7}, mat={"front": [0.04, 0.14, 0.03]})
 
 
-# -- rippled and bent leaves (seed 002) ------------------------------------------------------
+# -- rippled and bent leaves (Geng, Hu & Zhang 2014) ------------------------------------------------------
 def R(name, rows, ripple, bending=None, jitter=None, mat=None, **shape):
     rows = [[v, x, 0.0] for v, x in rows]
     d = {"schema": 1, "name": name,

@@ -1,5 +1,5 @@
 """Viewport overlays drawn with ``shaders/overlay.vert``/``overlay.frag``: the control polygons
-and curves of A, S±, F± and G± (as in seed 004 Figs. 1 and 7), the drag handles and the ground
+and curves of A, S±, F± and G± (as in Chaurasia & Beardsley 2017 Figs. 1 and 7), the drag handles and the ground
 grid.
 
 Vertex data is rebuilt only when the leaf changes (the viewer passes its revision); every frame

@@ -205,9 +205,9 @@ class ParamPanel:
         self._after_widget(f"edit:{key}")
 
     def draw_edits(self) -> None:
-        """Width scaling, asymmetry and curvature sliders (seed 004 sec. 6, Fig. 7)."""
+        """Width scaling, asymmetry and curvature sliders (Chaurasia & Beardsley 2017 sec. 6, Fig. 7)."""
         imgui.set_next_item_open(True, imgui.Cond_.always if self.expand_all else imgui.Cond_.first_use_ever)
-        if not imgui.collapsing_header("Edits (seed 004 sec. 6)##group-edits"):
+        if not imgui.collapsing_header("Edits (Chaurasia & Beardsley 2017 sec. 6)##group-edits"):
             return
         sh = self.state.params.shape
         self._relative_slider("width", "width ×", 0.25, 2.5, "×%.2f", scale_width)

@@ -46,7 +46,7 @@ from leafview.scene.camera import frame_view
 
 __all__ = ["run", "main", "GOALS", "PAPER_LEAVES_PER_S"]
 
-PAPER_LEAVES_PER_S = 550.0  # seed 001: ~550 leaf instances/s on a quad-core laptop
+PAPER_LEAVES_PER_S = 550.0  # Garg & Leow 2011: ~550 leaf instances/s on a quad-core laptop
 THUMB_SIZE = (128, 128)
 THUMB_GRID = (32, 64)
 SCENE_GRID = (9, 15)        # 2·8·14 = 224 triangles per leaf

@@ -1,5 +1,5 @@
 """``leafview bench shapes``: botanical leaves generated (landmark model → Ω fit) and rendered
-per second, against Garg & Leow's ~550 leaf instances/s (seed 001 sec. 4.3, ~220 triangles, a
+per second, against Garg & Leow's ~550 leaf instances/s (Garg & Leow 2011 sec. 4.3, ~220 triangles, a
 quad-core laptop).
 
 Measured side by side in one process, medians, ``ctx.finish()`` before the clock stops; nothing

@@ -1,7 +1,7 @@
 """Asymmetric leaves (Garg & Leow Fig. 6) in the shader model: one leaf per side of the midrib.
 
 The shader model Ω is mirror-symmetric about its axis: both halves of the blade share the
-silhouette rows (seed 004 eqs 3-6). A landmark leaf whose sides differ is therefore drawn as two
+silhouette rows (Chaurasia & Beardsley 2017 eqs 3-6). A landmark leaf whose sides differ is therefore drawn as two
 one-sided leaves (``shape.half``): the side x > 0 (the u < 0 half, ``half = -1``) is fitted to the
 right margin alone, the side x < 0 (``half = +1``) to the left margin mirrored, each with
 :func:`leafview.botany.outline_fit.fit_outline`. Both keep the straight axis A(v) = (0, v, 0), and

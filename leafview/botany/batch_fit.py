@@ -3,7 +3,7 @@
 :func:`leafview.botany.outline_fit.fit_outline` fits one outline in about 0.2 s (least-squares
 polish) or 0.025 s (linear least squares with parameter correction, up to 3.5 % off). Random
 instances of the catalogue (Garg & Leow Fig. 8) come by the hundred, so this module fits the same
-model, the right-side silhouette S of seed 004 eq. 1 (a Bézier of degree N + 1 from the base
+model, the right-side silhouette S of Chaurasia & Beardsley 2017 eq. 1 (a Bézier of degree N + 1 from the base
 (0, 0) to the apex (0, 1), straight axis, eq. 3 with tilt for the rows), to a whole batch with
 stacked arrays:
 

@@ -1,4 +1,4 @@
-"""The landmark leaf model of Garg & Leow (seed 001, secs 4.1-4.2).
+"""The landmark leaf model of Garg & Leow (Garg & Leow 2011, secs 4.1-4.2).
 
 One side of a unilobed leaf is a margin through a few landmark points, each with a unit tangent:
 

@@ -3,10 +3,10 @@
 The target is an outline in leaf space, base at (0, 0) and apex at (0, 1), as written by
 :func:`leafview.botany.landmarks.outline` (Garg & Leow eqs 2-6): the right side (x > 0) from the
 base up to the apex, then the left side back down. The result is a :class:`LeafParams` whose
-margin (the ``u = ±1`` curves of :func:`leafview.deform.surface.evaluate`, seed 004 eqs 3-6) follows
+margin (the ``u = ±1`` curves of :func:`leafview.deform.surface.evaluate`, Chaurasia & Beardsley 2017 eqs 3-6) follows
 that outline, so every catalogue shape renders through the shader path.
 
-How (seed 004 sec. 3; the fit itself is ours):
+How (Chaurasia & Beardsley 2017 sec. 3; the fit itself is ours):
 
 1. The axis A stays straight, ``a1 = (0, 1/3, 0)``, ``a2 = (0, 2/3, 0)``, so ``A(v) = (0, v, 0)``
    and ``n = -x`` (eq. 2). The model is mirror-symmetric about the axis; an asymmetric outline is

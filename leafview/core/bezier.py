@@ -1,4 +1,4 @@
-"""Bézier curves in power-basis form (seed 004, eq. 1) and their derivatives.
+"""Bézier curves in power-basis form (Chaurasia & Beardsley 2017, eq. 1) and their derivatives.
 
 A degree-n curve is ``B(t) = [1, t, ..., t^n] · Z · [b_0 ... b_n]^T`` where ``Z`` holds
 the Bernstein coefficients. The same basis is written in ``shaders/bezier.glsl``; tests compare

@@ -1,4 +1,4 @@
-"""Reference evaluation of the leaf surface L_Ω(u, v) (seed 004 sec. 3, eqs 1-6) in float64.
+"""Reference evaluation of the leaf surface L_Ω(u, v) (Chaurasia & Beardsley 2017 sec. 3, eqs 1-6) in float64.
 
 Conventions (the GLSL in ``shaders/leaf_eval.glsl`` follows them line for line):
 
@@ -55,7 +55,7 @@ __all__ = [
 ]
 
 JITTER_TABLE_SIZE = 256
-BASE = np.zeros(3)                # fixed base and apex of every leaf (seed 004 sec. 3)
+BASE = np.zeros(3)                # fixed base and apex of every leaf (Chaurasia & Beardsley 2017 sec. 3)
 APEX = np.array([0.0, 1.0, 0.0])
 
 

@@ -1,4 +1,4 @@
-"""Leaf parameters: the 21-number shape vector Ω of seed 004 sec. 3 plus jitter, material and
+"""Leaf parameters: the 21-number shape vector Ω of Chaurasia & Beardsley 2017 sec. 3 plus jitter, material and
 world transform, with validation that names the offending field.
 
 Layout of Ω (``to_vector`` / ``from_vector``)::
@@ -138,7 +138,7 @@ class Shape:
 
 @dataclass(frozen=True)
 class Jitter:
-    """Serrated margin (seed 004 sec. 6): a periodic table of ``table_size`` values in [0, 1]
+    """Serrated margin (Chaurasia & Beardsley 2017 sec. 6): a periodic table of ``table_size`` values in [0, 1]
     drawn from ``seed``, read at ``v · density``; ``amplitude`` is the largest outward offset in
     leaf lengths (the paper's "degree")."""
 
@@ -163,7 +163,7 @@ class Material:
 
 @dataclass(frozen=True)
 class Transform:
-    """World placement, kept apart from the shape (seed 004 sec. 3, "coordinate frames")."""
+    """World placement, kept apart from the shape (Chaurasia & Beardsley 2017 sec. 3, "coordinate frames")."""
 
     translation: Vec3 = _spec("translation", "transform", -5, 5, 0.01, kind="vec3",
                               default=(0.0, 0.0, 0.0))
@@ -215,7 +215,7 @@ Pair = tuple[float, float]
 
 @dataclass(frozen=True)
 class Ripple:
-    """Rippled margins (seed 002 sec. 5.2.3, eq. 5). Each cross-section is a secondary vein, a
+    """Rippled margins (Geng, Hu & Zhang 2014 sec. 5.2.3, eq. 5). Each cross-section is a secondary vein, a
     cantilever from the midrib, under the turbulent load ``P [λ + (1 - λ) N(k i + θ)]`` with
     ``N`` the fBm signal of ``beta`` and ``seed`` and ``i = veins · v``. Pairs are
     ``[left, right]`` as seen in the top view (left: the u >= 0 half, -x)."""
@@ -237,7 +237,7 @@ class Ripple:
 
 @dataclass(frozen=True)
 class Bending:
-    """Cantilever bending of the midrib and petiole (seed 002 sec. 4, eq. 4, and sec. 5.2.2) under
+    """Cantilever bending of the midrib and petiole (Geng, Hu & Zhang 2014 sec. 4, eq. 4, and sec. 5.2.2) under
     a load along ``direction`` (world space, default gravity), and a twist about the midrib that
     grows linearly to ``twist`` degrees at the apex. ``load`` is per unit blade area; only
     ``load / stiffness`` matters for the shape."""

@@ -1,8 +1,8 @@
 """The JSON Schema of the leaf parameter file, generated from the parameter dataclasses.
 
 A leaf file (TOML or JSON, see :mod:`leafview.core.io`) holds ``schema``, an optional
-``name`` and the groups of :class:`~leafview.core.params.LeafParams` (``shape`` is Ω of seed 004
-sec. 3, eqs 3-4; ``jitter`` sec. 6; ``ripple`` and ``bending`` seed 002 eqs 4-5; ``material``;
+``name`` and the groups of :class:`~leafview.core.params.LeafParams` (``shape`` is Ω of Chaurasia & Beardsley 2017
+sec. 3, eqs 3-4; ``jitter`` sec. 6; ``ripple`` and ``bending`` Geng, Hu & Zhang 2014 eqs 4-5; ``material``;
 ``transform``). :func:`leaf_schema` builds a JSON Schema (draft 2020-12) of that document from
 :func:`~leafview.core.params.field_specs` and the dataclass defaults, so it follows the code:
 
@@ -146,7 +146,7 @@ def leaf_schema() -> dict[str, Any]:
         "$id": SCHEMA_ID,
         "title": "leafview leaf parameters",
         "description": ("One parametric leaf (leafview): the Bézier shape vector Ω of Chaurasia & Beardsley "
-                        "(seed 004, eqs 3-4), jitter, ripples and bending (seed 002, eqs 4-5), material and "
+                        "(Chaurasia & Beardsley 2017, eqs 3-4), jitter, ripples and bending (Geng, Hu & Zhang 2014, eqs 4-5), material and "
                         "placement. Stored as TOML or JSON. Lengths are in leaf lengths (base (0,0,0), apex "
                         "(0,1,0)); angles in degrees; colours linear RGB."),
         "type": "object",
@@ -211,7 +211,7 @@ def compact_schema() -> dict[str, Any]:
         "$schema": DIALECT,
         "$id": f"urn:leafview:schema:leaf-compact:{COMPACT_VERSION}",
         "title": "leafview compact leaf",
-        "description": ("One parametric leaf in the compact form: Ω as one list (seed 004 eqs 3-4) and only the "
+        "description": ("One parametric leaf in the compact form: Ω as one list (Chaurasia & Beardsley 2017 eqs 3-4) and only the "
                         "settings that differ from their defaults (the defaults are the 'default' values in "
                         "leaf.schema.json); or a leaf set {\"leafview\": 1, \"leaves\": [...]}. Numbers are "
                         "the shortest decimals that read back to the same float64."),

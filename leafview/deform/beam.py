@@ -1,4 +1,4 @@
-"""Cantilever-beam bending (seed 002 sec. 4, eq. 4) of the midrib and petiole, and the bend
+"""Cantilever-beam bending (Geng, Hu & Zhang 2014 sec. 4, eq. 4) of the midrib and petiole, and the bend
 profile the leaf shader applies.
 
 For a chain of segments from a fixed joint, segment i makes the angle θ⁰_i with the load

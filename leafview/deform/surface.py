@@ -66,7 +66,7 @@ def partials(params: LeafParams, u: ArrayLike, v: ArrayLike, *, bend: BendProfil
 
 
 def _add_ripple(params, s, sigma, vv, L, Lu, Lv, Luv):
-    """Rippled margin (seed 002 eq. 5): each cross-section is a secondary vein, a cantilever from
+    """Rippled margin (Geng, Hu & Zhang 2014 eq. 5): each cross-section is a secondary vein, a cantilever from
     the midrib under the turbulent load ``r = P [λ + (1 - λ) N(k · veins · v + θ)]``. In the
     small-deflection limit of eq. 4 a tip-loaded cantilever deflects as ``c(s) = s² (3 - s) / 2``
     (zero with zero slope at the midrib, 1 at the margin), so ``D = τ(v) r(v) c(|u|) ẑ``: out of
@@ -89,7 +89,7 @@ def _add_ripple(params, s, sigma, vv, L, Lu, Lv, Luv):
 
 
 def _bend(bp, vv, A, dA, L, Lu, Lv, Luv):
-    """Apply the midrib bend and twist (seed 002 sec. 5.2.2) to L and its partials.
+    """Apply the midrib bend and twist (Geng, Hu & Zhang 2014 sec. 5.2.2) to L and its partials.
 
     ``p' = A(v) + Δ(v) + R(v) (p - A(v))`` with ``R = R_N(Φ(v)) R_y(α v)``: the cross-section at
     v is twisted about the straight midrib's direction (y) through A(v), then turned with the

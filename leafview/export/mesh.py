@@ -8,7 +8,7 @@ needed; the two agree to float32 rounding, see ``tests/test_gpu_eval.py``). Jitt
 bending are part of both.
 
 The pinched tips. Every curve of the model starts at the base (0, 0, 0) and ends at the apex
-(0, 1, 0) (seed 004 sec. 3, eqs 3-4), so the grid rows v = 0 and v = 1 each collapse to one
+(0, 1, 0) (Chaurasia & Beardsley 2017 sec. 3, eqs 3-4), so the grid rows v = 0 and v = 1 each collapse to one
 point and half of the quads along them turn into triangles with two corners on that point. The
 renderer rasterises nothing for them; an exported file would carry them as degenerate triangles
 (validators flag them, some tools divide by their zero area). :func:`bake` drops exactly those
@@ -184,13 +184,13 @@ def bake(params: LeafParams, resolution: Sequence[int] = DEFAULT_RESOLUTION, *, 
     Parameters
     ----------
     params:
-        The leaf. ``params.transform`` matters only through the bend (seed 002 eq. 4 loads the
+        The leaf. ``params.transform`` matters only through the bend (Geng, Hu & Zhang 2014 eq. 4 loads the
         blade along a world direction); the mesh itself is in leaf space.
     resolution:
         ``(nu, nv)`` grid samples across and along the blade (default 33×65, the renderer's).
     backend:
         ``"gpu"``: positions and normals read back from the rendering vertex shader;
-        ``"numpy"``: the float64 reference (eqs 1-6 of seed 004, eqs 4-5 of seed 002).
+        ``"numpy"``: the float64 reference (eqs 1-6 of Chaurasia & Beardsley 2017, eqs 4-5 of Geng, Hu & Zhang 2014).
     renderer:
         A :class:`~leafview.gpu.LeafRenderer` for ``"gpu"`` (default: the shared headless one).
     """

@@ -8,12 +8,12 @@ self-contained) with weights, and how much leaves vary within a species.
 :func:`build_scene` expands it deterministically into a :class:`Scene`: per-leaf arrays that the
 GPU path packs into one storage-buffer row per leaf.
 
-Variation within a species (seed 001 sec. 4 uses up to ±20 %): every leaf gets its own factors
+Variation within a species (Garg & Leow 2011 sec. 4 uses up to ±20 %): every leaf gets its own factors
 ``f ∈ [1 - variation, 1 + variation]``, one per Ω component (:data:`VARIED`), multiplying the
 species' value; ``v̄`` positions stay inside (0, 1). The leaf colour is multiplied by
 ``1 ± colour_variation`` (one factor per leaf). Each plant takes one species, drawn by weight.
 
-Bending in scenes: the cantilever solve (seed 002 eq. 4) runs once per species, in the species'
+Bending in scenes: the cantilever solve (Geng, Hu & Zhang 2014 eq. 4) runs once per species, in the species'
 own rest frame, and every leaf of that species carries that droop (a per-leaf solve costs about a
 millisecond, too much for 10⁶ leaves). A leaf whose shape factors differ from 1 therefore droops
 like its species, not exactly as its own solve would give; :func:`bend_deviation` measures it.

@@ -2,7 +2,7 @@
 woody skeleton of many plants, and the nodes on it where leaves sit (phyllotaxis).
 
 Every woody axis of a plant (trunk, branch, twig) and every petiole is a *generalized cylinder*
-(Bloomenthal's branches, as recalled in seed 000 sec. 2 and used for veins in seed 003 ch. 6.1):
+(Bloomenthal's branches, as recalled in Mündermann et al. 2003 sec. 2 and used for veins in Hong 2005 ch. 6.1):
 a circle swept along a spine (the carrier curve) with a radius that tapers along it. All the
 functions here work on many axes at once (arrays with a leading axis dimension), so a plant
 generator loops over levels of the branching hierarchy in Python, never over axes or leaves.
