@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support.display import DisplayUnavailable, display_env, xvfb
 
 from leafview.core.params import LeafParams
 from leafview.export.images import PARAMS_ATTRIBUTE, read_image
@@ -31,35 +32,16 @@ def _unavailable(reason: str) -> None:
 
 @pytest.fixture(scope="module")
 def display(tmp_path_factory):
-    """A private Xvfb server; Xvfb picks a free display number itself (-displayfd)."""
-    exe = shutil.which("Xvfb")
-    if exe is None:
-        _unavailable("Xvfb is not installed (apt-get install xvfb)")
-    log = tmp_path_factory.mktemp("xvfb") / "xvfb.log"
-    read_fd, write_fd = os.pipe()
-    with open(log, "wb") as err:
-        proc = subprocess.Popen([exe, "-displayfd", str(write_fd), "-screen", "0", "1280x800x24", "-nolisten", "tcp"],
-                                pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=err)
-    os.close(write_fd)
+    """A private Xvfb server (tests/support/display.py)."""
     try:
-        with os.fdopen(read_fd) as pipe:
-            number = pipe.readline().strip()  # written once the server accepts connections
-        if not number:
-            _unavailable(f"Xvfb did not start: {log.read_text(errors='replace').strip()[-300:]}")
-        yield f":{number}"
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        with xvfb(tmp_path_factory.mktemp("xvfb") / "xvfb.log") as number:
+            yield number
+    except DisplayUnavailable as exc:
+        _unavailable(str(exc))
 
 
 def _env(display: str) -> dict[str, str]:
-    env = dict(os.environ, DISPLAY=display)
-    env.pop("WAYLAND_DISPLAY", None)
-    return env
+    return display_env(display)
 
 
 def _run(args: list[str], display: str, cwd: Path, timeout: int = 120) -> subprocess.CompletedProcess:
