@@ -1,19 +1,13 @@
 #version 450
-// Batched fBm synthesis (Geng, Hu & Zhang 2014 sec. 3, eqs 1-2): one work group per signal. Each signal has
+// Batched fBm synthesis (Geng, Hu & Zhang 2014, sec. 3, eqs 1-2): one work group per signal. Each signal has
 // a seed, beta and length n (even, <= 2048) and is written, normalised to zero mean and unit
 // standard deviation, to signals[offset .. offset + n). numpy reference: leafview/deform/fbm.py.
 layout(local_size_x = 64) in;
 #include "fbm.glsl"
+#include "generated/fbm_job.glsl"
 
-struct FbmJob {
-    uint seed;
-    float beta;
-    uint n;
-    uint offset;
-};
-
-layout(std430, binding = 5) readonly buffer Jobs { FbmJob jobs[]; };
-layout(std430, binding = 3) buffer Signals { float signals[]; };
+layout(std430, binding = FBM_JOBS_BINDING) readonly buffer Jobs { FbmJob jobs[]; };
+layout(std430, binding = SIGNALS_BINDING) buffer Signals { float signals[]; };
 
 shared float amp[1024];
 shared float phase[1024];

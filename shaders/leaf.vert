@@ -9,11 +9,11 @@
 #if defined(LEAF_INDIRECT)
 // scenes: the culling pass lists visible leaves per level of detail; each draw command's
 // baseInstance points at its level's list, read as a per-instance attribute
-layout(std430, binding = 2) readonly buffer Leaves { LeafData leaves[]; };
+layout(std430, binding = LEAVES_BINDING) readonly buffer Leaves { LeafData leaves[]; };
 in uint in_leaf;
 #define LEAF leaves[in_leaf]
 #elif defined(LEAF_INSTANCED)
-layout(std430, binding = 2) readonly buffer Leaves { LeafData leaves[]; };
+layout(std430, binding = LEAVES_BINDING) readonly buffer Leaves { LeafData leaves[]; };
 #define LEAF leaves[gl_InstanceID]
 #else
 #define LEAF leaf
@@ -21,7 +21,7 @@ layout(std430, binding = 2) readonly buffer Leaves { LeafData leaves[]; };
 #include "leaf_eval.glsl"
 
 // jitter tables, one row per seed (moderngl has no 1D textures; a 2D texture of 1D rows)
-layout(binding = 0) uniform sampler2D jitter_table;
+layout(binding = JITTER_UNIT) uniform sampler2D jitter_table;
 
 in vec2 in_uv;
 
@@ -38,7 +38,7 @@ void main() {
     // [-1, 1] spreads over [0, 1] or [-1, 0], u' = (u + half) / 2 (leafview.deform.surface.drawn_uv)
     vec2 uv = in_uv;
 #ifndef LEAF_NO_HALF
-    float half_side = LEAF.back.w;
+    float half_side = leaf_half(LEAF);
     if (half_side != 0.0) uv.x = 0.5 * (uv.x + half_side);  // keeps the winding (front faces)
 #endif
     LeafEval e = leaf_eval(jitter_table, uv);

@@ -1,4 +1,4 @@
-// The leaf surface L_Ω(u, v) of Chaurasia & Beardsley 2017 sec. 3 (eqs 2-6), its partial derivatives and normal,
+// The leaf surface L_Ω(u, v) (Chaurasia & Beardsley 2017, sec. 3, eqs 2-6), its partial derivatives and normal,
 // plus the jittered silhouette of sec. 6.
 // Shader permutations: LEAF_NO_JITTER, LEAF_NO_RIPPLE, LEAF_NO_BEND and LEAF_NO_EXTENDED (and
 // LEAF_NO_HALF in leaf.vert) compile the feature out when no leaf of a draw uses it
@@ -15,7 +15,7 @@
 #include "fbm.glsl"
 
 // the ripple signals (fBm, one row of RIPPLE_SAMPLES per (seed, beta)), written by fbm.comp
-layout(std430, binding = 3) readonly buffer Signals { float signals[]; };
+layout(std430, binding = SIGNALS_BINDING) readonly buffer Signals { float signals[]; };
 
 struct LeafEval {
     vec3 L;    // position (leaf space)
@@ -33,17 +33,17 @@ vec2 tip_taper(float v) {
     return vec2(1.0 - w3 * w, -8.0 * w3);
 }
 
-// Rippled margin (Geng, Hu & Zhang 2014 eq. 5): D = tau(v) r(v) c(|u|) z, r = P [lambda + (1 - lambda) N(k veins v
+// Rippled margin (Geng, Hu & Zhang 2014, eq. 5): D = tau(v) r(v) c(|u|) z, r = P [lambda + (1 - lambda) N(k veins v
 // + theta)], c(s) = s^2 (3 - s) / 2 the small-deflection shape of a tip-loaded cantilever (the
 // secondary vein from the midrib). numpy reference: leafview/deform/surface.py, _add_ripple.
 void add_ripple(float sigma, float s, float v, inout LeafEval e) {
     vec4 rp = sigma > 0.0 ? LEAF.ripple_l : LEAF.ripple_r;  // P, lambda, k, theta
-    int base = int(LEAF.deform.w) * RIPPLE_SAMPLES;
-    float t = rp.z * LEAF.deform.z * v + rp.w;
+    int base = leaf_signal_row(LEAF) * RIPPLE_SAMPLES;
+    float t = rp.z * leaf_veins(LEAF) * v + rp.w;
     vec2 n;
     FBM_SAMPLE_PERIODIC(signals, base, RIPPLE_SAMPLES, t, n);
     float r = rp.x * (rp.y + (1.0 - rp.y) * n.x);
-    float dr = rp.x * (1.0 - rp.y) * n.y * rp.z * LEAF.deform.z;
+    float dr = rp.x * (1.0 - rp.y) * n.y * rp.z * leaf_veins(LEAF);
     vec2 tau = tip_taper(v);
     float c = 0.5 * s * s * (3.0 - s);
     float dc = 3.0 * s - 1.5 * s * s;
@@ -70,7 +70,7 @@ vec4 bend_sample(int i) {
     return LEAF.bend[i];
 }
 
-// Midrib bend and twist (Geng, Hu & Zhang 2014 secs 4, 5.2.2): p' = A + Delta(v) + R(v) (p - A), R = R_N(Phi(v))
+// Midrib bend and twist (Geng, Hu & Zhang 2014, secs 4, 5.2.2): p' = A + Delta(v) + R(v) (p - A), R = R_N(Phi(v))
 // R_y(alpha v), Delta and Phi Catmull-Rom through the host's bend samples. numpy reference:
 // leafview/deform/surface.py, _bend, and leafview/deform/beam.py, sample_clamped.
 void apply_bend(float v, vec3 Av, vec3 dAv, inout LeafEval e) {
@@ -85,7 +85,7 @@ void apply_bend(float v, vec3 Av, vec3 dAv, inout LeafEval e) {
     vec4 slope = ((3.0 * c3 * x + 2.0 * c2) * x + c1) * float(BEND_SAMPLES - 1);
 
     vec3 axis = LEAF.bend_axis.xyz;
-    float alpha = LEAF.bend_axis.w;
+    float alpha = leaf_twist(LEAF);
     const vec3 Y = vec3(0.0, 1.0, 0.0);
     mat3 rn = axis_rotation(axis, val.w);
     mat3 ry = axis_rotation(Y, alpha * v);
@@ -131,8 +131,7 @@ void ext_silhouette(int rows, float v, out vec3 Pv, out vec3 Qv, out vec3 dPv, o
         int k = i - 1;  // row index
         vec4 ka = k < 3 ? LEAF.axis[min(k, 2)] : LEAF.sil_axis[max(k - 3, 0)];
         vec4 kh = k < 3 ? LEAF.heights[min(k, 2)] : LEAF.sil_heights[max(k - 3, 0)];
-        vec4 tp = LEAF.sil_tilt[k / 2];
-        vec2 T = (k % 2 == 0) ? tp.xy : tp.zw;
+        vec2 T = leaf_sil_tilt(LEAF, k);
         vec3 Q = vec3(ka.w, kh.w, 0.0);
         Pv += w * ka.xyz;
         dPv += dw * ka.xyz;
@@ -173,7 +172,7 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
 #ifdef LEAF_NO_EXTENDED
     const int rows = 0;           // no leaf of this draw is extended: the branches below fold away
 #else
-    int rows = int(LEAF.tilt.w);  // 0: the paper's quartic; N: an extended silhouette of N rows
+    int rows = leaf_rows(LEAF);  // 0: the paper's quartic; N: an extended silhouette of N rows
 #endif
     if (rows == 0) {
         // quartic weights at v for the inner points (the base is the origin, so it drops out) and
@@ -220,18 +219,20 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
 
     // jittered silhouette (sec. 6): D = amp j(v) s^2 tau(v) sigma n(v)
 #ifndef LEAF_NO_JITTER
-    float amp = LEAF.jitter.x;
+    float amp = leaf_jitter_amplitude(LEAF);
     if (amp > 0.0) {
-        int size = int(LEAF.jitter.z);
-        float t = v * LEAF.jitter.y;
+        int size = leaf_jitter_size(LEAF);
+        float density = leaf_jitter_density(LEAF);
+        int row = leaf_jitter_row(LEAF);
+        float t = v * density;
         float fi = floor(t);
         float fr = t - fi;
         int i0 = int(mod(fi, float(size)));
         int i1 = (i0 + 1) % size;
-        float j0 = texelFetch(jitter_tex, ivec2(i0, int(LEAF.jitter.w)), 0).r;
-        float j1 = texelFetch(jitter_tex, ivec2(i1, int(LEAF.jitter.w)), 0).r;
+        float j0 = texelFetch(jitter_tex, ivec2(i0, row), 0).r;
+        float j1 = texelFetch(jitter_tex, ivec2(i1, row), 0).r;
         float j = j0 + (j1 - j0) * fr;
-        float dj = (j1 - j0) * LEAF.jitter.y;
+        float dj = (j1 - j0) * density;
         vec2 taper = tip_taper(v);
         float tau = taper.x, dtau = taper.y;
 
@@ -251,12 +252,12 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
     }
 #endif
 #ifndef LEAF_NO_RIPPLE
-    if (LEAF.deform.x > 0.0) {
+    if (leaf_ripple_on(LEAF)) {
         add_ripple(sigma, s, v, e);
     }
 #endif
 #ifndef LEAF_NO_BEND
-    if (LEAF.deform.y > 0.0) {
+    if (leaf_bend_on(LEAF)) {
         apply_bend(v, Av, dAv, e);
     }
 #endif

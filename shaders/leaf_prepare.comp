@@ -3,7 +3,7 @@
 // points A(v̄_i) and the scaled in-plane normals x̄s_i n(v̄_i) (eq. 2). The vertex shader reads
 // them from the same LeafData row, packed with the heights z̄f, z̄g, z̄s so that it reads six vec4s
 // per vertex (see layout.py). numpy reference: leafview/deform/surface.py, axis_frames().
-// Extended silhouettes (tilt.w = N > 0): rows may be tilted by φ_i, so the normal part is
+// Extended silhouettes (leaf_rows = N > 0): rows may be tilted by φ_i, so the normal part is
 // x̄s_i cos φ_i n(v̄_i) and a side-independent offset -x̄s_i sin φ_i t(v̄_i) (t the unit axis
 // tangent) goes to sil_tilt; rows 4..N go to sil_axis / sil_heights. numpy reference:
 // axis_frames() and tilt_offsets().
@@ -11,14 +11,14 @@ layout(local_size_x = 64) in;
 #include "generated/leaf_block.glsl"
 #include "bezier.glsl"
 
-layout(std430, binding = 2) buffer Leaves { LeafData leaves[]; };
+layout(std430, binding = LEAVES_BINDING) buffer Leaves { LeafData leaves[]; };
 uniform uint count;
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
     if (i >= count) return;
     vec3 a1 = leaves[i].a1.xyz, a2 = leaves[i].a2.xyz;
-    int rows = int(leaves[i].tilt.w);
+    int rows = leaf_rows(leaves[i]);
     if (rows == 0) {  // the paper's quartic
         for (int k = 0; k < 3; ++k) {
             float vb = leaves[i].vbar[k];
@@ -36,10 +36,10 @@ void main() {
             zf = leaves[i].zf[k]; zg = leaves[i].zg[k];
         } else {
             vec4 r = leaves[i].sil_rows[k - 3];
-            vec4 fg = leaves[i].sil_fg[(k - 3) / 2];
+            vec2 fg = leaf_sil_fg(leaves[i], k - 3);
             vb = r.x; xs = r.y; zs = r.z; phi = r.w;
-            zf = ((k - 3) % 2 == 0) ? fg.x : fg.z;
-            zg = ((k - 3) % 2 == 0) ? fg.y : fg.w;
+            zf = fg.x;
+            zg = fg.y;
         }
         vec3 p = cubic(LEAF_BASE, a1, a2, LEAF_APEX, vb);
         vec3 d = cubic_dt(LEAF_BASE, a1, a2, LEAF_APEX, vb);

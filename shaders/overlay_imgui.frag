@@ -1,6 +1,6 @@
 #version 450
 // Dear ImGui fragments: vertex colour times the bound texture (font atlas or user image).
-layout(binding = 0) uniform sampler2D atlas;
+layout(binding = ATLAS_UNIT) uniform sampler2D atlas;
 
 in vec2 v_uv;
 in vec4 v_color;

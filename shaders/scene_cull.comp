@@ -9,11 +9,11 @@ layout(local_size_x = 64) in;
 #include "generated/leaf_block.glsl"
 #include "generated/scene_blocks.glsl"
 
-layout(std430, binding = 2) readonly buffer Leaves { LeafData leaves[]; };
-layout(std430, binding = 4) readonly buffer SpeciesOf { uint species_of[]; };
-layout(std430, binding = 5) readonly buffer Species { SpeciesCull species[]; };
-layout(std430, binding = 6) buffer Commands { DrawCommand commands[]; };
-layout(std430, binding = 7) writeonly buffer Visible { uint visible[]; };
+layout(std430, binding = LEAVES_BINDING) readonly buffer Leaves { LeafData leaves[]; };
+layout(std430, binding = SPECIES_OF_BINDING) readonly buffer SpeciesOf { uint species_of[]; };
+layout(std430, binding = SPECIES_BINDING) readonly buffer Species { SpeciesCull species[]; };
+layout(std430, binding = COMMANDS_BINDING) buffer Commands { DrawCommand commands[]; };
+layout(std430, binding = VISIBLE_BINDING) writeonly buffer Visible { uint visible[]; };
 
 uniform uint count;
 uniform vec4 planes[6];       // world-space planes, inside where dot(n, p) + d >= 0

@@ -9,7 +9,7 @@ import pytest
 import leafview
 from leafview.core.params import Jitter
 from leafview.deform.surface import grid_uv
-from leafview.gpu.layout import FRAME_BLOCK, LEAF_BLOCK, pack_leaf
+from leafview.gpu.layout import FRAME_BLOCK, LEAF_BINDING, LEAF_BLOCK, LEAVES_BINDING, READBACK_BINDING, pack_leaf
 from tests.conftest import random_params, run_prepare
 
 pytestmark = pytest.mark.gl
@@ -107,8 +107,8 @@ def test_every_member_offset_matches_std140_and_std430(gl, tmp_path):
     n_floats = LEAF_BLOCK.nbytes // 4
     (tmp_path / "probe.comp").write_text(
         "#version 450\nlayout(local_size_x = 1) in;\n#include \"generated/leaf_block.glsl\"\n"
-        "layout(std430, binding = 2) readonly buffer Leaves { LeafData leaves[]; };\n"
-        "layout(std430, binding = 3) writeonly buffer Out { float data[]; };\n"
+        "layout(std430, binding = LEAVES_BINDING) readonly buffer Leaves { LeafData leaves[]; };\n"
+        "layout(std430, binding = READBACK_BINDING) writeonly buffer Out { float data[]; };\n"
         "void main() {\n  data[0] = float(leaves.length());\n"
         f"#define OFS 0\n{_flatten_glsl('leaf')}\n#undef OFS\n#define OFS {n_floats}\n{_flatten_glsl('leaves[1]')}\n}}\n")
     rng = np.random.default_rng(9)
@@ -120,9 +120,9 @@ def test_every_member_offset_matches_std140_and_std430(gl, tmp_path):
     ssbo = gl.ctx.buffer(rows.tobytes())
     out = gl.ctx.buffer(reserve=4 * (1 + 2 * n_floats))
     try:
-        ubo.bind_to_uniform_block(0)
-        ssbo.bind_to_storage_buffer(2)
-        out.bind_to_storage_buffer(3)
+        ubo.bind_to_uniform_block(LEAF_BINDING)
+        ssbo.bind_to_storage_buffer(LEAVES_BINDING)
+        out.bind_to_storage_buffer(READBACK_BINDING)
         shader.run(1)
         data = np.frombuffer(out.read(), dtype=np.float32)
     finally:
@@ -192,8 +192,6 @@ def test_parameter_bytes_exclude_exactly_the_derived_members():
 def test_shader_permutations_match_the_full_program(gl, presets):
     """For every preset, the variant compiled for its features (see feature_defines) captures
     exactly the full program's vertices and normals."""
-    import moderngl
-
     from leafview.gpu.layout import feature_defines, pack_leaf
     from leafview.shapes import shapes_params
 
@@ -209,21 +207,7 @@ def test_shader_permutations_match_the_full_program(gl, presets):
     leaves = {**presets, "extended": extended, "one side": one_side,
               "extended, one side": extended.replace(shape=dataclasses.replace(extended.shape, half=1))}
     uv = leafview.deform.surface.grid_uv(9, 15)
-    vbo = gl.ctx.buffer(uv.tobytes())
-    try:
-        for name, leaf in leaves.items():
-            variant = gl._program(feature_defines(pack_leaf(leaf)))
-            gl.set_leaf(leaf)
-            outs = []
-            for prog in (gl.program, variant):
-                out = gl.ctx.buffer(reserve=len(uv) * 24)
-                vao = gl.ctx.vertex_array(prog, [(vbo, "2f", "in_uv")])
-                gl._bind()
-                gl._capture_target().use()
-                vao.transform(out, mode=moderngl.POINTS, vertices=len(uv))
-                outs.append(np.frombuffer(out.read(), np.float32).copy())
-                vao.release()
-                out.release()
-            np.testing.assert_array_equal(outs[0], outs[1], err_msg=name)
-    finally:
-        vbo.release()
+    for name, leaf in leaves.items():
+        outs = [np.concatenate(gl.capture(leaf, uv[:, 0], uv[:, 1], defines=defines), axis=1)
+                for defines in (None, feature_defines(pack_leaf(leaf)))]  # None: the full program
+        np.testing.assert_array_equal(outs[0], outs[1], err_msg=name)

@@ -16,6 +16,7 @@ import moderngl
 import numpy as np
 from imgui_bundle import imgui
 
+from leafview.gpu.layout import ATLAS_UNIT
 from leafview.gpu.shaders import build_program
 
 __all__ = ["ImguiRenderer"]
@@ -65,12 +66,12 @@ class ImguiRenderer:
             tex.set_tex_id(gl_tex.glo)
             tex.status = _Status.ok
         elif tex.status == _Status.want_updates:
-            gl_tex = self.textures.get(int(tex.tex_id))
-            if gl_tex is not None:
+            known = self.textures.get(int(tex.tex_id))
+            if known is not None:
                 pixels = tex.get_pixels_array().reshape(tex.height, tex.width, 4)
                 for r in tex.updates:
                     block = np.ascontiguousarray(pixels[r.y:r.y + r.h, r.x:r.x + r.w])
-                    gl_tex.write(block.tobytes(), viewport=(r.x, r.y, r.w, r.h))
+                    known.write(block.tobytes(), viewport=(r.x, r.y, r.w, r.h))
             tex.status = _Status.ok
         elif tex.status == _Status.want_destroy and tex.unused_frames > 0:
             self._destroy(tex)
@@ -94,9 +95,11 @@ class ImguiRenderer:
             return
         ctx = self.ctx
         ctx.enable_only(moderngl.BLEND)
-        ctx.blend_equation = moderngl.FUNC_ADD
-        ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE,
-                          moderngl.ONE_MINUS_SRC_ALPHA)
+        # moderngl-stubs 5.13 type both as 2-tuples; moderngl takes one equation for rgb and alpha
+        # and a separate (rgb, alpha) blend func pair, as the stubs' own docstrings show
+        ctx.blend_equation = moderngl.FUNC_ADD  # type: ignore[assignment]
+        ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA,  # type: ignore[assignment]
+                          moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
         ctx.wireframe = False
         ctx.viewport = (0, 0, fb_w, fb_h)
         left, right = pos_x, pos_x + draw_data.display_size.x
@@ -107,14 +110,16 @@ class ImguiRenderer:
             [0.0, 0.0, -1.0, 0.0],
             [(right + left) / (left - right), (top + bottom) / (bottom - top), 0.0, 1.0],
         ], dtype="f4")
-        self.program["proj"].write(proj.tobytes())
+        proj_uniform = self.program["proj"]
+        assert isinstance(proj_uniform, moderngl.Uniform)   # moderngl types a lookup as any member kind
+        proj_uniform.write(proj.tobytes())
         try:
             for cmd_list in draw_data.cmd_lists:
                 self._draw_list(cmd_list, pos_x, pos_y, scale_x, scale_y, fb_w, fb_h)
         finally:
             ctx.scissor = None
             ctx.disable(moderngl.BLEND)
-            ctx.blend_func = moderngl.DEFAULT_BLENDING
+            ctx.blend_func = moderngl.DEFAULT_BLENDING  # type: ignore[assignment]  # a 2-tuple, stubbed as int
 
     def _draw_list(self, cmd_list: Any, pos_x: float, pos_y: float, sx: float, sy: float,
                    fb_w: int, fb_h: int) -> None:
@@ -148,7 +153,7 @@ class ImguiRenderer:
             tex = self.textures.get(int(cmd.tex_ref.get_tex_id()))
             if tex is None:
                 continue  # a texture this renderer does not know (none is created elsewhere)
-            tex.use(location=0)
+            tex.use(location=ATLAS_UNIT)
             self.vao.render(moderngl.TRIANGLES, vertices=cmd.elem_count, first=cmd.idx_offset)
 
     @staticmethod
@@ -168,8 +173,8 @@ class ImguiRenderer:
             io = imgui.get_io()
             io.backend_flags &= ~imgui.BackendFlags_.renderer_has_textures
             io.backend_flags &= ~imgui.BackendFlags_.renderer_has_vtx_offset
-        for tex in self.textures.values():
-            tex.release()
+        for gl_tex in self.textures.values():
+            gl_tex.release()
         self.textures.clear()
         for obj in (self.vao, self.vbo, self.ibo, self.program):
             obj.release()

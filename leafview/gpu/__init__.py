@@ -1,7 +1,9 @@
-"""Everything that touches OpenGL: contexts, shader loading, the leaf renderer, readback.
+"""Everything that touches OpenGL: contexts, shader loading, the data layout, the shared GPU
+resources, the leaf, instanced and scene renderers, readback.
 
 The module-level :func:`render` and :func:`evaluate` use one process-wide headless renderer,
-created on first use and released by :func:`shutdown` (also registered with ``atexit``).
+created on first use and released by :func:`shutdown` (also registered with ``atexit``); its
+:class:`GpuResources` are shared by the other module-level helpers (sheets, morph frames).
 """
 
 from __future__ import annotations
@@ -15,10 +17,10 @@ from numpy.typing import ArrayLike, NDArray
 from leafview.core.params import LeafParams
 from leafview.gpu.context import GLUnavailable, check_error, create_headless_context
 from leafview.gpu.renderer import DEFAULT_GRID, LeafRenderer
-from leafview.gpu.ripple import RipplePass
+from leafview.gpu.resources import GpuResources
 from leafview.gpu.shaders import ShaderError
 
-__all__ = ["LeafRenderer", "GLUnavailable", "ShaderError", "create_headless_context", "check_error",
+__all__ = ["LeafRenderer", "GpuResources", "GLUnavailable", "ShaderError", "create_headless_context", "check_error",
            "default_renderer", "render", "evaluate", "shutdown", "DEFAULT_GRID", "gpu_fbm_noise"]
 
 _default: LeafRenderer | None = None
@@ -62,8 +64,7 @@ def evaluate(params: LeafParams, u: ArrayLike, v: ArrayLike) -> NDArray[np.float
 def gpu_fbm_noise(n: int, beta: float, seed: int) -> NDArray[np.float32]:
     """One fBm signal (Geng, Hu & Zhang 2014, eqs 1-2) from the compute pass on the shared headless
     context, float32; :func:`leafview.fbm_noise` with ``backend="gpu"``."""
-    ctx = default_renderer().ctx
-    rp = RipplePass(ctx, n)
+    rp = default_renderer().resources.ripple_pass(n)
     try:
         rp.update([(seed, beta)])
         return rp.read(0)

@@ -5,6 +5,8 @@ The backend is chosen by the caller, never by an environment variable read at im
 
 from __future__ import annotations
 
+from typing import Any
+
 import moderngl
 
 from leafview.errors import GLUnavailable
@@ -23,8 +25,9 @@ _EGL_HELP = (
 
 def create_headless_context(require: int = REQUIRED_GL) -> moderngl.Context:
     """A standalone EGL context (no display needed). Raises :class:`GLUnavailable`."""
+    settings: dict[str, Any] = {"backend": "egl"}
     try:
-        ctx = moderngl.create_standalone_context(backend="egl", require=require)
+        ctx = moderngl.create_standalone_context(require=require, **settings)
     except Exception as exc:  # glcontext raises plain Exceptions with loader messages
         raise GLUnavailable(f"{_EGL_HELP}\n  (reason: {exc})") from None
     return ctx

@@ -1,7 +1,7 @@
 """Many leaves in one draw call: the parametric (instanced) path and its baked-mesh twin.
 
 :class:`InstancedLeaves` uploads one :data:`~leafview.gpu.layout.LEAF_BLOCK` record per leaf to a
-shader storage buffer (binding 2) and draws a single (nu × nv) grid ``N`` times with one
+shader storage buffer (``LEAVES_BINDING``) and draws a single (nu × nv) grid ``N`` times with one
 instanced call; ``leaf.vert`` (built with ``LEAF_INSTANCED``) evaluates L_Ω per vertex from
 ``leaves[gl_InstanceID]``.
 
@@ -13,7 +13,9 @@ ahead of time, either on the CPU with the numpy reference (:meth:`BakedLeaves.fr
 
 Both are used by :mod:`leafview.bench.core` (parameters vs baked meshes) and by the tests that
 check they draw the same picture. Neither changes the framebuffer binding: bind a target, call
-``set_camera`` and ``draw``. ``draw`` enables only the depth test.
+``set_camera`` and ``draw``. ``draw`` enables only the depth test. Programs, the grid and the
+capture come from a shared :class:`~leafview.gpu.resources.GpuResources` (``resources=``), or
+from a private set each batch owns.
 """
 
 from __future__ import annotations
@@ -26,12 +28,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.params import Jitter, LeafParams, Material, Shape, Transform
-from leafview.deform.surface import JITTER_TABLE_SIZE, grid_indices, grid_uv, tessellate
-from leafview.gpu.layout import FRAME_BINDING, FRAME_BLOCK, LEAF_BLOCK, LEAVES_BINDING, feature_defines, pack_leaves
-from leafview.gpu.prepare import LeafPrepare
-from leafview.gpu.renderer import Lighting, fill_frame
-from leafview.gpu.ripple import RipplePass
-from leafview.gpu.shaders import build_program
+from leafview.deform.surface import grid_indices, grid_uv, tessellate
+from leafview.gpu.frame import FrameUniforms, Lighting
+from leafview.gpu.layout import LEAF_BLOCK, LEAVES_BINDING, feature_defines, pack_leaves
+from leafview.gpu.owner import GLObjects
+from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, JitterTable
+from leafview.gpu.targets import OffscreenTarget, read_rgba
 from leafview.scene.camera import Camera
 
 __all__ = ["LEAVES_BINDING", "InstancedLeaves", "BakedLeaves", "pack_leaves", "bake_leaves",
@@ -56,7 +58,7 @@ def scatter_leaves(n: int, seed: int = 0, *, radius: float | None = None,
     out = []
     for i in range(n):
         d = rng.normal(size=3)
-        d /= max(np.linalg.norm(d), 1e-9)
+        d /= max(float(np.linalg.norm(d)), 1e-9)
         pos = d * radius * rng.random() ** (1 / 3)
         rows = tuple((vb, xs * (1.0 + 0.15 * (rng.random() - 0.5)), zs + 0.04 * (rng.random() - 0.5))
                      for vb, xs, zs in base.silhouette)
@@ -70,15 +72,19 @@ def scatter_leaves(n: int, seed: int = 0, *, radius: float | None = None,
         jit = Jitter(enabled=bool(rng.random() < jitter_fraction), amplitude=0.02,
                      density=24.0, seed=int(rng.integers(0, 3)))
         tint = 0.85 + 0.3 * rng.random()
-        mat = Material(front=tuple(float(np.clip(c * tint, 0, 1)) for c in (0.18, 0.42, 0.12)),
-                       back=tuple(float(np.clip(c * tint, 0, 1)) for c in (0.40, 0.58, 0.26)),
+        mat = Material(front=_vec3(np.clip(np.array([0.18, 0.42, 0.12]) * tint, 0, 1)),
+                       back=_vec3(np.clip(np.array([0.40, 0.58, 0.26]) * tint, 0, 1)),
                        translucency=float(0.25 + 0.2 * rng.random()))
-        tr = Transform(translation=tuple(float(x) for x in pos),
+        tr = Transform(translation=_vec3(pos),
                        rotation=(float(rng.uniform(-70, 70)), float(rng.uniform(-70, 70)),
                                  float(rng.uniform(-180, 180))),
                        scale=float(rng.uniform(0.3, 0.5)))
         out.append(LeafParams(shape=shape, jitter=jit, material=mat, transform=tr, name=f"leaf{i}"))
     return out
+
+
+def _vec3(x: NDArray[np.float64]) -> tuple[float, float, float]:
+    return float(x[0]), float(x[1]), float(x[2])
 
 
 def bake_leaves(params: Sequence[LeafParams], grid: tuple[int, int]
@@ -105,82 +111,28 @@ def bake_leaves(params: Sequence[LeafParams], grid: tuple[int, int]
 
 
 # ---------------------------------------------------------------------------------------------
-# GL helpers
-class OffscreenTarget:
-    """An RGBA8 + depth framebuffer (context-managed).
-
-    ``release()`` first binds framebuffer 0: moderngl re-binds the *current* framebuffer after
-    creating a new one, so a deleted-but-current framebuffer would make the next
-    ``ctx.framebuffer()`` raise GL_INVALID_OPERATION.
-    """
-
-    def __init__(self, ctx: moderngl.Context, size: tuple[int, int], samples: int = 0) -> None:
-        self.ctx, self.size = ctx, (int(size[0]), int(size[1]))
-        self._objects: list[Any] = []
-        try:
-            color = self._own(ctx.renderbuffer(self.size, 4, samples=samples))
-            depth = self._own(ctx.depth_renderbuffer(self.size, samples=samples))
-            self.fbo = self._own(ctx.framebuffer([color], depth))
-        except BaseException:
-            self.release()
-            raise
-
-    def _own(self, obj: Any) -> Any:
-        self._objects.append(obj)
-        return obj
-
-    def use(self) -> None:
-        self.fbo.use()
-
-    def clear(self, rgba: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> None:
-        self.fbo.clear(*rgba, depth=1.0)
-
-    def read(self) -> NDArray[np.uint8]:
-        """(h, w, 4) uint8, row 0 at the top."""
-        return read_rgba(self.fbo)
-
-    def release(self) -> None:
-        if self._objects:
-            self.ctx.detect_framebuffer(0).use()
-        while self._objects:
-            self._objects.pop().release()
-
-    def __enter__(self) -> OffscreenTarget:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()
-
-
-def read_rgba(fbo: moderngl.Framebuffer) -> NDArray[np.uint8]:
-    """(h, w, 4) uint8, row 0 at the top."""
-    w, h = fbo.size
-    img = np.frombuffer(fbo.read(components=4), np.uint8).reshape(h, w, 4)
-    return np.ascontiguousarray(img[::-1])
-
-
+# GL
 class _Batch:
-    """Shared state of the two paths: the Frame uniform block and the GL objects to release."""
+    """Shared state of the two paths: the resources they draw with (borrowed or owned), their
+    Frame block and the GL objects to release."""
 
     program: moderngl.Program
-    vao: moderngl.VertexArray
     nu: int
     nv: int
+    count: int
 
-    def __init__(self, ctx: moderngl.Context) -> None:
+    def __init__(self, ctx: moderngl.Context, resources: GpuResources | None) -> None:
         self.ctx = ctx
-        self._objects: list[Any] = []
-        self._frame = FRAME_BLOCK.zeros()
-        self.frame_ubo = self._own(ctx.buffer(reserve=FRAME_BLOCK.nbytes))
+        self._objects = GLObjects()
+        self.resources = resources if resources is not None else self._objects.own(GpuResources(ctx))
+        self.frame = self._objects.own(FrameUniforms(ctx))
 
     def _own(self, obj: Any) -> Any:
-        self._objects.append(obj)
-        return obj
+        return self._objects.own(obj)
 
     def release(self) -> None:
         """Release every GL object this batch created (idempotent)."""
-        while self._objects:
-            self._objects.pop().release()
+        self._objects.release()
 
     def __enter__(self) -> Any:
         return self
@@ -190,15 +142,14 @@ class _Batch:
 
     def set_camera(self, camera: Camera, *, srgb: bool = True, flat: bool = False,
                    lighting: type[Lighting] = Lighting) -> None:
-        fill_frame(self._frame, camera, srgb=srgb, flat=flat, lighting=lighting)
-        self.frame_ubo.write(self._frame.tobytes())
+        self.frame.set_camera(camera, srgb=srgb, flat=flat, lighting=lighting)
 
     @property
     def triangles_per_leaf(self) -> int:
         return 2 * (self.nu - 1) * (self.nv - 1)
 
     def _bind(self) -> None:
-        self.frame_ubo.bind_to_uniform_block(FRAME_BINDING)
+        self.frame.bind()
 
 
 class InstancedLeaves(_Batch):
@@ -214,45 +165,38 @@ class InstancedLeaves(_Batch):
     grid:
         (nu, nv) samples of the shared (u, v) grid; 2(nu-1)(nv-1) triangles per leaf.
     jitter_tables:
-        (rows, JITTER_TABLE_SIZE) float32 jitter values indexed by ``record["jitter"][3]``
+        (rows, JITTER_TABLE_SIZE) float32 jitter values indexed by each record's jitter row
         (see :func:`pack_leaves`); default one row of zeros.
+    ripple_signals:
+        ``(seed, beta)`` of each ripple signal row (:func:`~leafview.gpu.layout.ripple_keys`).
+    resources:
+        Shared programs, grids and capture; ``None``: a private set, released with this batch.
     """
 
     def __init__(self, ctx: moderngl.Context, records: Any, grid: tuple[int, int] = (9, 15), *,
                  jitter_tables: ArrayLike | None = None,
-                 ripple_signals: Sequence[tuple[int, float]] = ()) -> None:
-        super().__init__(ctx)
+                 ripple_signals: Sequence[tuple[int, float]] = (),
+                 resources: GpuResources | None = None) -> None:
+        recs = self.records = _as_records(records)
+        self.count = int(recs.shape[0])
+        limit = int(ctx.info["GL_MAX_SHADER_STORAGE_BLOCK_SIZE"])
+        nbytes = max(recs.nbytes, LEAF_BLOCK.nbytes)
+        if nbytes > limit:
+            raise ValueError(
+                f"{self.count} leaves need a {nbytes}-byte storage buffer, above this driver's "
+                f"GL_MAX_SHADER_STORAGE_BLOCK_SIZE = {limit} bytes "
+                f"(at most {limit // LEAF_BLOCK.nbytes} leaves per draw)")
+        super().__init__(ctx, resources)
         try:
-            recs = self.records = _as_records(records)
-            self.count = int(recs.shape[0])
-            limit = int(ctx.info["GL_MAX_SHADER_STORAGE_BLOCK_SIZE"])
-            nbytes = max(recs.nbytes, LEAF_BLOCK.nbytes)
-            if nbytes > limit:
-                raise ValueError(
-                    f"{self.count} leaves need a {nbytes}-byte storage buffer, above this driver's "
-                    f"GL_MAX_SHADER_STORAGE_BLOCK_SIZE = {limit} bytes "
-                    f"(at most {limit // LEAF_BLOCK.nbytes} leaves per draw)")
             self.nu, self.nv = grid
-            self.program = self._own(build_program(ctx, "leaf.vert", "leaf.frag",
-                                                   defines={"LEAF_INSTANCED": 1, **feature_defines(recs)},
-                                                   varyings=("v_world", "v_normal")))
-            self.program["Frame"].binding = FRAME_BINDING
-            self.ssbo = self._own(ctx.buffer(recs.tobytes() if self.count else
-                                             bytes(LEAF_BLOCK.nbytes)))
-            prepare = self._own(LeafPrepare(ctx))
-            prepare.run(self.ssbo, self.count)  # derived per-leaf fields, one dispatch for all
+            self.program = self.resources.leaf_program({"LEAF_INSTANCED": 1, **feature_defines(recs)},
+                                                       varyings=WORLD_VARYINGS)
+            self.ssbo = self._own(ctx.buffer(recs.tobytes() if self.count else bytes(LEAF_BLOCK.nbytes)))
+            self.resources.prepare.run(self.ssbo, self.count)  # derived per-leaf fields, one dispatch
             # every leaf's ripple signal (rows as pack_leaves assigned them), one dispatch for all
-            self.ripples = self._own(RipplePass(ctx))
+            self.ripples = self._own(self.resources.ripple_pass())
             self.ripples.update(list(ripple_signals))
-            table = (np.zeros((1, JITTER_TABLE_SIZE), np.float32) if jitter_tables is None
-                     else np.ascontiguousarray(np.atleast_2d(np.asarray(jitter_tables, np.float32))))
-            self.jitter_tex = self._own(ctx.texture((table.shape[1], table.shape[0]), 1,
-                                                    table.tobytes(), dtype="f4"))
-            self.jitter_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            self._vbo = self._own(ctx.buffer(grid_uv(self.nu, self.nv).tobytes()))
-            self._ibo = self._own(ctx.buffer(grid_indices(self.nu, self.nv).tobytes()))
-            self.vao = self._own(ctx.vertex_array(self.program, [(self._vbo, "2f", "in_uv")],
-                                                  index_buffer=self._ibo, index_element_size=4))
+            self.jitter = self._own(JitterTable(ctx, jitter_tables))
         except BaseException:
             self.release()
             raise
@@ -260,7 +204,7 @@ class InstancedLeaves(_Batch):
     def _bind(self) -> None:
         super()._bind()
         self.ssbo.bind_to_storage_buffer(LEAVES_BINDING)
-        self.jitter_tex.use(location=0)
+        self.jitter.use()
         self.ripples.bind()
 
     def draw(self) -> None:
@@ -269,27 +213,20 @@ class InstancedLeaves(_Batch):
             return
         self.ctx.enable_only(moderngl.DEPTH_TEST)
         self._bind()
-        self.vao.render(moderngl.TRIANGLES, instances=self.count)
+        self.resources.grid(self.nu, self.nv).vao(self.program).render(moderngl.TRIANGLES, instances=self.count)
 
     def capture(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         """World positions and normals of every grid vertex of every instance as the vertex
-        shader computes them (transform feedback): two (N, nu·nv, 3) float32 arrays.
-
-        A framebuffer must be bound (a surfaceless context has no default one)."""
+        shader computes them (transform feedback): two (N, nu·nv, 3) float32 arrays. The
+        framebuffer binding is left as it was."""
         nverts = self.nu * self.nv
         if not self.count:
             z = np.zeros((0, nverts, 3), np.float32)
             return z, z.copy()
         self._bind()
-        out = self.ctx.buffer(reserve=self.count * nverts * 24)
-        vao = self.ctx.vertex_array(self.program, [(self._vbo, "2f", "in_uv")])
-        try:
-            vao.transform(out, mode=moderngl.POINTS, vertices=nverts, instances=self.count)
-            data = np.frombuffer(out.read(), np.float32).reshape(self.count, nverts, 6)
-        finally:
-            vao.release()
-            out.release()
-        return data[..., :3].copy(), data[..., 3:].copy()
+        points = self.resources.grid(self.nu, self.nv).points(self.program)
+        pos, nrm = self.resources.capture.points(points, nverts, self.count)
+        return pos.reshape(self.count, nverts, 3), nrm.reshape(self.count, nverts, 3)
 
 
 class BakedLeaves(_Batch):
@@ -300,8 +237,9 @@ class BakedLeaves(_Batch):
     """
 
     def __init__(self, ctx: moderngl.Context, positions: ArrayLike, normals: ArrayLike,
-                 grid: tuple[int, int], front: ArrayLike, back: ArrayLike) -> None:
-        super().__init__(ctx)
+                 grid: tuple[int, int], front: ArrayLike, back: ArrayLike, *,
+                 resources: GpuResources | None = None) -> None:
+        super().__init__(ctx, resources)
         try:
             self.nu, self.nv = grid
             nverts = self.nu * self.nv
@@ -324,8 +262,7 @@ class BakedLeaves(_Batch):
             tris = grid_indices(self.nu, self.nv)
             idx = (tris[None] + (np.arange(n, dtype=np.uint32) * nverts)[:, None, None])
             self.index_count = int(idx.size)
-            self.program = self._own(build_program(ctx, "leaf_baked.vert", "leaf.frag"))
-            self.program["Frame"].binding = FRAME_BINDING
+            self.program = self.resources.baked_program()
             self.vbo = self._own(ctx.buffer(verts.tobytes() if n else bytes(vdt.itemsize)))
             self.ibo = self._own(ctx.buffer(idx.astype(np.uint32).tobytes() if n else bytes(12)))
             self.vao = self._own(ctx.vertex_array(self.program, [(self.vbo, _BAKED_FORMAT, *_BAKED_ATTRS)],
@@ -336,20 +273,21 @@ class BakedLeaves(_Batch):
 
     @classmethod
     def from_params(cls, ctx: moderngl.Context, params: Sequence[LeafParams],
-                    grid: tuple[int, int] = (9, 15)) -> BakedLeaves:
+                    grid: tuple[int, int] = (9, 15), *, resources: GpuResources | None = None) -> BakedLeaves:
         pos, nrm = bake_leaves(params, grid)
         front = [(*p.material.front, p.material.translucency) for p in params]
         back = [p.material.back for p in params]
-        return cls(ctx, pos, nrm, grid, np.reshape(front, (-1, 4)), np.reshape(back, (-1, 3)))
+        return cls(ctx, pos, nrm, grid, np.reshape(front, (-1, 4)), np.reshape(back, (-1, 3)),
+                   resources=resources)
 
     @classmethod
-    def from_instanced(cls, leaves: InstancedLeaves) -> BakedLeaves:
+    def from_instanced(cls, leaves: InstancedLeaves, *, resources: GpuResources | None = None) -> BakedLeaves:
         """Bake by capturing what ``leaves``' vertex shader computes (transform feedback): the
-        fast way to bake many leaves; bit-identical vertices to the instanced draw. A
-        framebuffer must be bound."""
+        fast way to bake many leaves; bit-identical vertices to the instanced draw."""
         pos, nrm = leaves.capture()
         recs = leaves.records
-        return cls(leaves.ctx, pos, nrm, (leaves.nu, leaves.nv), recs["front"], recs["back"][:, :3])
+        return cls(leaves.ctx, pos, nrm, (leaves.nu, leaves.nv), recs["front"], recs["back"][:, :3],
+                   resources=resources)
 
     def draw(self) -> None:
         """All leaves, one indexed draw, into the bound framebuffer (depth test on)."""

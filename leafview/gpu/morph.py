@@ -1,4 +1,4 @@
-"""Morph sequences rendered through the shader path (Garg & Leow sec. 6).
+"""Morph sequences rendered through the shader path (Garg & Leow 2011, sec. 6).
 
 :mod:`leafview.botany.morph` gives the path in leaf space (eq. 11) and its frames as landmark
 leaves; here each frame is fitted to the shader model Ω (:mod:`leafview.botany.outline_fit`) and
@@ -192,7 +192,7 @@ def render_sequence(frames: Sequence[Sequence[LeafParams]], size: int, view: str
                                         renderer=renderer, camera=camera))
             step = 1
         else:
-            batch = []
+            batch: list[LeafParams] = []
             while start + len(batch) < len(frames) and len(batch) < 16 and len(frames[start + len(batch)]) == 1:
                 batch.append(frames[start + len(batch)][0])
             images += renderer.render_many(batch, (size, size), view, grid=DETAIL_GRID, camera=camera)

@@ -1,6 +1,8 @@
 """The per-leaf prepare pass: ``shaders/leaf_prepare.comp`` fills the derived fields
-(``axis_p``, ``axis_q``) of LeafData rows from Ω, once per leaf, so the vertex shader does not
-recompute them for every vertex. Run it after writing rows and before drawing them.
+(``axis``, ``heights`` and, for extended silhouettes, ``sil_axis``, ``sil_heights``,
+``sil_tilt``) of LeafData rows from Ω, once per leaf, so the vertex shader does not recompute
+them for every vertex (Chaurasia & Beardsley 2017, eqs 2-4). Run it after writing rows and
+before drawing them.
 """
 
 from __future__ import annotations
@@ -8,6 +10,7 @@ from __future__ import annotations
 import moderngl
 
 from leafview.gpu.layout import LEAF_BLOCK, LEAVES_BINDING
+from leafview.gpu.programs import ProgramCache
 from leafview.gpu.shaders import build_compute
 
 __all__ = ["LeafPrepare"]
@@ -16,12 +19,17 @@ _LOCAL_SIZE = 64
 
 
 class LeafPrepare:
-    """Owns the compute program; :meth:`run` prepares ``count`` tightly packed rows of ``buffer``
-    starting at byte ``offset`` (a uniform buffer holding one row works too)."""
+    """:meth:`run` prepares ``count`` tightly packed rows of ``buffer`` starting at byte
+    ``offset`` (a uniform buffer holding one row works too).
 
-    def __init__(self, ctx: moderngl.Context) -> None:
+    The compute program comes from ``programs`` (shared, released with the cache) or, without
+    one, is compiled here and released by :meth:`release`."""
+
+    def __init__(self, ctx: moderngl.Context, *, programs: ProgramCache | None = None) -> None:
         self.ctx = ctx
-        self.shader = build_compute(ctx, "leaf_prepare.comp")
+        self._owned = programs is None
+        self.shader = (build_compute(ctx, "leaf_prepare.comp") if programs is None
+                       else programs.compute("leaf_prepare.comp"))
 
     def run(self, buffer: moderngl.Buffer, count: int, offset: int = 0) -> None:
         if count <= 0:
@@ -33,4 +41,5 @@ class LeafPrepare:
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
 
     def release(self) -> None:
-        self.shader.release()
+        if self._owned:
+            self.shader.release()

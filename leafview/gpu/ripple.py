@@ -1,5 +1,6 @@
-"""The ripple pass: fBm signals synthesised on the GPU (``shaders/fbm.comp``), all leaves of a
-draw in one dispatch, into a storage buffer the leaf vertex shader samples (binding 3).
+"""The ripple pass: fBm signals synthesised on the GPU (``shaders/fbm.comp``, Geng, Hu & Zhang
+2014, eqs 1-2), all leaves of a draw in one dispatch, into a storage buffer the leaf vertex
+shader samples (``SIGNALS_BINDING``).
 
 Only a change of a signal's seed or β re-runs the pass; the ripple amplitudes, fluctuation λ,
 sampling interval k and phase θ live in the leaf's uniform block.
@@ -14,79 +15,72 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leafview.deform.fbm import MAX_SAMPLES, RIPPLE_SAMPLES
+from leafview.gpu.layout import FBM_JOB_DTYPE, FBM_JOBS_BINDING, SIGNALS_BINDING
+from leafview.gpu.owner import GrowingBuffer
+from leafview.gpu.programs import ProgramCache
 from leafview.gpu.shaders import build_compute
 
 __all__ = ["RipplePass", "RIPPLE_SAMPLES", "SIGNALS_BINDING"]
 
-SIGNALS_BINDING = 3
-_JOBS_BINDING = 5
-_JOB = np.dtype([("seed", "<u4"), ("beta", "<f4"), ("n", "<u4"), ("offset", "<u4")])
-
 
 class RipplePass:
-    """Owns the synthesis program and the signal buffer.
+    """Owns the signal buffer (and, without a shared ``programs`` cache, the synthesis program).
 
     :meth:`update` takes one ``(seed, beta)`` per signal row and (re)computes only the rows whose
     key changed, in a single dispatch; rows keep their index, which leaf records refer to.
     """
 
-    def __init__(self, ctx: moderngl.Context, n: int = RIPPLE_SAMPLES) -> None:
+    def __init__(self, ctx: moderngl.Context, n: int = RIPPLE_SAMPLES, *,
+                 programs: ProgramCache | None = None) -> None:
         if n % 2 or not 4 <= n <= MAX_SAMPLES:
             raise ValueError(f"ripple signals need an even length in 4..{MAX_SAMPLES}, got {n}")
         self.ctx, self.n = ctx, n
-        self.shader = build_compute(ctx, "fbm.comp")
-        self.signals: moderngl.Buffer | None = None
-        self._jobs: moderngl.Buffer | None = None
+        self._owns_shader = programs is None
+        self.shader = build_compute(ctx, "fbm.comp") if programs is None else programs.compute("fbm.comp")
+        self._signals = GrowingBuffer(ctx)
+        self._jobs = GrowingBuffer(ctx)
         self._keys: list[tuple[int, float] | None] = []
         self.dispatches = 0
+
+    @property
+    def signals(self) -> moderngl.Buffer | None:
+        """The signal buffer (None before the first :meth:`update`)."""
+        return self._signals.buffer if self._signals.size else None
 
     def update(self, keys: Sequence[tuple[int, float]]) -> int:
         """Make row i hold the signal of ``keys[i] = (seed, beta)``; returns rows recomputed."""
         rows = len(keys)
-        need = max(rows, 1) * self.n * 4
-        if self.signals is None or self.signals.size < need:
-            old = self.signals
-            self.signals = self.ctx.buffer(reserve=_grow(need))
-            if old is not None:
-                self.signals.write(old.read())
-                old.release()
+        signals = self._signals.ensure(max(rows, 1) * self.n * 4, keep=True)
         stale = [i for i, key in enumerate(keys) if i >= len(self._keys) or self._keys[i] != key]
         self._keys = list(self._keys[:rows]) + [None] * max(0, rows - len(self._keys))
         if not stale:
             return 0
-        jobs = np.zeros(len(stale), dtype=_JOB)
+        jobs = np.zeros(len(stale), dtype=FBM_JOB_DTYPE)
         for j, i in enumerate(stale):
             seed, beta = keys[i]
             jobs[j] = (int(seed) & 0xFFFFFFFF, float(beta), self.n, i * self.n)
-        if self._jobs is None or self._jobs.size < jobs.nbytes:
-            if self._jobs is not None:
-                self._jobs.release()
-            self._jobs = self.ctx.buffer(reserve=_grow(jobs.nbytes))
-        self._jobs.write(jobs.tobytes())
-        self._jobs.bind_to_storage_buffer(_JOBS_BINDING)
-        self.signals.bind_to_storage_buffer(SIGNALS_BINDING)
+        self._jobs.write(jobs.tobytes()).bind_to_storage_buffer(FBM_JOBS_BINDING)
+        signals.bind_to_storage_buffer(SIGNALS_BINDING)
         self.shader.run(group_x=len(stale))
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
         self.dispatches += 1
         for i in stale:
-            self._keys[i] = tuple(keys[i])
+            seed, beta = keys[i]
+            self._keys[i] = (int(seed), float(beta))
         return len(stale)
 
     def bind(self) -> None:
-        if self.signals is None:
+        if not self._signals.size:
             self.update([(0, 1.0)])
-        self.signals.bind_to_storage_buffer(SIGNALS_BINDING)
+        self._signals.buffer.bind_to_storage_buffer(SIGNALS_BINDING)
 
     def read(self, row: int) -> NDArray[np.float32]:
-        assert self.signals is not None
-        return np.frombuffer(self.signals.read(size=self.n * 4, offset=row * self.n * 4), np.float32).copy()
+        raw = self._signals.buffer.read(size=self.n * 4, offset=row * self.n * 4)
+        return np.frombuffer(raw, np.float32).copy()
 
     def release(self) -> None:
-        for obj in (self.shader, self.signals, self._jobs):
-            if obj is not None:
-                obj.release()
-        self.signals = self._jobs = None
-
-
-def _grow(n: int) -> int:
-    return 1 << max(0, int(n - 1).bit_length())
+        if self._owns_shader:
+            self.shader.release()
+        self._owns_shader = False
+        self._signals.release()
+        self._jobs.release()

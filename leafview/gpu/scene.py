@@ -26,29 +26,31 @@ from typing import Any
 
 import moderngl
 import numpy as np
+import pyrr
 from numpy.typing import NDArray
+from scipy.ndimage import distance_transform_edt
 
 from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.params import LeafParams
 from leafview.deform.surface import evaluate, grid_indices, grid_uv
 from leafview.errors import SceneLimitError
 from leafview.gpu.context import check_error
-from leafview.gpu.instanced import read_rgba
+from leafview.gpu.frame import FrameUniforms, Lighting
 from leafview.gpu.layout import (
+    COMMANDS_BINDING,
     DRAW_COMMAND_DTYPE,
-    FRAME_BINDING,
-    FRAME_BLOCK,
     LEAF_BLOCK,
     LEAVES_BINDING,
+    SPECIES_BINDING,
     SPECIES_CULL_BLOCK,
+    SPECIES_OF_BINDING,
+    VISIBLE_BINDING,
     feature_defines,
     pack_leaves,
     ripple_keys,
 )
-from leafview.gpu.prepare import LeafPrepare
-from leafview.gpu.renderer import Lighting, fill_frame
-from leafview.gpu.ripple import RipplePass
-from leafview.gpu.shaders import build_compute, build_program
+from leafview.gpu.owner import GLObjects
+from leafview.gpu.resources import GpuResources, JitterTable
 from leafview.resources import resolve_preset
 from leafview.scene.camera import Camera, frame_view
 from leafview.scene.spec import Scene, SceneSpec
@@ -57,7 +59,6 @@ __all__ = ["LOD_GRIDS", "CullSettings", "SceneRenderer", "SceneLimitError", "pac
            "frustum_planes", "cull_reference", "scene_camera", "SCENE_VIEWS"]
 
 LOD_GRIDS: tuple[tuple[int, int], ...] = ((9, 17), (5, 9), (3, 5))  # 256, 64, 16 triangles
-SPECIES_OF_BINDING, SPECIES_BINDING, COMMANDS_BINDING, VISIBLE_BINDING = 4, 5, 6, 7
 STEM_FRONT = (0.30, 0.22, 0.14, 0.0)
 STEM_BACK = (0.30, 0.22, 0.14)
 SCENE_VIEWS = ("three-quarter", "top", "front", "side", "ground")
@@ -209,8 +210,6 @@ def scene_camera(scene: Scene, size: tuple[int, int], view: str = "three-quarter
     """A camera for ``view``: the standard views frame the scene's bounding box; ``ground`` stands
     at the edge of the scene at 60 % of its height, looking across it (a walker's view, where
     leaves span from a few pixels to the whole image)."""
-    import pyrr
-
     if view not in SCENE_VIEWS:
         raise ValueError(f"unknown view {view!r} (choose from {', '.join(SCENE_VIEWS)})")
     lo, hi = scene.bounds()
@@ -235,31 +234,31 @@ class _SceneBatch:
     def __init__(self, owner: SceneRenderer, start: int, stop: int) -> None:
         ctx = owner.ctx
         self.start, self.count = start, stop - start
-        self.objects: list[Any] = []
-        rows = pack_scene(owner.scene, start, stop, owner.species_records)
-        self.rows = self._own(ctx.buffer(rows.tobytes()))
-        del rows
-        owner.prepare.run(self.rows, self.count)
-        self.species_of = self._own(ctx.buffer(owner.scene.species_id[start:stop].astype(np.uint32).tobytes()))
-        levels = len(owner.grids)
-        self.visible = self._own(ctx.buffer(reserve=4 * self.count * levels))
-        self.reset = np.zeros(levels, DRAW_COMMAND_DTYPE)
-        self.reset["count"] = owner.index_counts
-        self.reset["first_index"] = owner.first_index
-        self.reset["base_vertex"] = owner.base_vertex
-        self.reset["base_instance"] = np.arange(levels) * self.count
-        self.commands = self._own(ctx.buffer(self.reset.tobytes()))
-        self.vao = self._own(ctx.vertex_array(owner.program, [(owner.uv_vbo, "2f", "in_uv"),
-                                                              (self.visible, "1u/i", "in_leaf")],
-                                              index_buffer=owner.ibo, index_element_size=4))
-
-    def _own(self, obj: Any) -> Any:
-        self.objects.append(obj)
-        return obj
+        self._objects = GLObjects()
+        try:
+            rows = pack_scene(owner.scene, start, stop, owner.species_records)
+            self.rows = self._objects.own(ctx.buffer(rows.tobytes()))
+            del rows
+            owner.resources.prepare.run(self.rows, self.count)
+            self.species_of = self._objects.own(
+                ctx.buffer(owner.scene.species_id[start:stop].astype(np.uint32).tobytes()))
+            levels = len(owner.grids)
+            self.visible = self._objects.own(ctx.buffer(reserve=4 * self.count * levels))
+            self.reset = np.zeros(levels, DRAW_COMMAND_DTYPE)
+            self.reset["count"] = owner.index_counts
+            self.reset["first_index"] = owner.first_index
+            self.reset["base_vertex"] = owner.base_vertex
+            self.reset["base_instance"] = np.arange(levels) * self.count
+            self.commands = self._objects.own(ctx.buffer(self.reset.tobytes()))
+            self.vao = self._objects.own(ctx.vertex_array(owner.program, [(owner.uv_vbo, "2f", "in_uv"),
+                                                                          (self.visible, "1u/i", "in_leaf")],
+                                                          index_buffer=owner.ibo, index_element_size=4))
+        except BaseException:
+            self.release()
+            raise
 
     def release(self) -> None:
-        while self.objects:
-            self.objects.pop().release()
+        self._objects.release()
 
 
 class SceneRenderer:
@@ -273,20 +272,24 @@ class SceneRenderer:
     max_block_bytes: storage-block size per batch (default: the context's
         ``GL_MAX_SHADER_STORAGE_BLOCK_SIZE``; smaller values force batching, for tests).
     progress: called with the number of leaves uploaded after each batch (progress bars).
+    resources: shared programs, prepare pass, targets and capture
+        (:class:`~leafview.gpu.resources.GpuResources`); ``None``: a private set.
 
     Raises :class:`SceneLimitError` when the rows cannot fit the context's limits; checks
     ``ctx.error`` after allocating so an out-of-memory is reported, not ignored.
     """
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, *, grids: Sequence[tuple[int, int]] = LOD_GRIDS,
-                 max_block_bytes: int | None = None, progress: Callable[[int], None] | None = None) -> None:
+                 max_block_bytes: int | None = None, progress: Callable[[int], None] | None = None,
+                 resources: GpuResources | None = None) -> None:
         self.ctx, self.scene = ctx, scene
-        self.grids = tuple(tuple(g) for g in grids)
+        self.grids: tuple[tuple[int, int], ...] = tuple((int(g[0]), int(g[1])) for g in grids)
         if not 1 <= len(self.grids) <= 4:
             raise ValueError("between 1 and 4 levels of detail")
-        self.objects: list[Any] = []
+        self._objects = GLObjects()
         self.batches: list[_SceneBatch] = []
         try:
+            self.resources = resources if resources is not None else self._objects.own(GpuResources(ctx))
             limit = int(ctx.info["GL_MAX_SHADER_STORAGE_BLOCK_SIZE"])
             if max_block_bytes is not None:
                 limit = min(limit, int(max_block_bytes))
@@ -294,21 +297,18 @@ class SceneRenderer:
             self.plan = plan_batches(len(scene), limit, groups)
             self.species_records, table, keys = species_tables(scene)
             self.cull_rows = species_cull(scene, self.grids)
-            defines = {"LEAF_INDIRECT": 1, **feature_defines(self.species_records)}
-            self.program = self._own(build_program(ctx, "leaf.vert", "leaf.frag", defines=defines,
-                                                   varyings=("v_object", "v_object_normal")))
-            self.program["Frame"].binding = FRAME_BINDING
-            self.cull = self._own(build_compute(ctx, "scene_cull.comp"))
-            self.prepare = self._own(LeafPrepare(ctx))
-            self.ripples = self._own(RipplePass(ctx))
+            self.program = self.resources.leaf_program({"LEAF_INDIRECT": 1, **feature_defines(self.species_records)})
+            self.cull = self.resources.programs.compute("scene_cull.comp")
+            self.ripples = self._objects.own(self.resources.ripple_pass())
             self.ripples.update(keys)
-            self.jitter_tex = self._own(ctx.texture((table.shape[1], table.shape[0]), 1, table.tobytes(), dtype="f4"))
-            self.jitter_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            self.species_ssbo = self._own(ctx.buffer(self.cull_rows.tobytes()))
-            self.frame_ubo = self._own(ctx.buffer(reserve=FRAME_BLOCK.nbytes))
-            self._frame = FRAME_BLOCK.zeros()
+            self.jitter = self._objects.own(JitterTable(ctx, table))
+            self.species_ssbo = self._objects.own(ctx.buffer(self.cull_rows.tobytes()))
+            self.frame = self._objects.own(FrameUniforms(ctx))
             # every level's grid in one vertex and one index buffer
-            uvs, idx, self.first_index, self.base_vertex, self.index_counts = [], [], [], [], []
+            uvs, idx = [], []
+            self.first_index: list[int] = []
+            self.base_vertex: list[int] = []
+            self.index_counts: list[int] = []
             nverts = nidx = 0
             for nu, nv in self.grids:
                 tri = grid_indices(nu, nv).ravel()
@@ -319,8 +319,8 @@ class SceneRenderer:
                 idx.append(tri)
                 nverts += nu * nv
                 nidx += tri.size
-            self.uv_vbo = self._own(ctx.buffer(np.concatenate(uvs).astype(np.float32).tobytes()))
-            self.ibo = self._own(ctx.buffer(np.concatenate(idx).astype(np.uint32).tobytes()))
+            self.uv_vbo = self._objects.own(ctx.buffer(np.concatenate(uvs).astype(np.float32).tobytes()))
+            self.ibo = self._objects.own(ctx.buffer(np.concatenate(idx).astype(np.uint32).tobytes()))
             self.stems = self._make_stems(scene.stems)
             for start, stop in self.plan:
                 self.batches.append(_SceneBatch(self, start, stop))
@@ -334,11 +334,7 @@ class SceneRenderer:
             self.release()
             raise
 
-    def _own(self, obj: Any) -> Any:
-        self.objects.append(obj)
-        return obj
-
-    def _make_stems(self, stems: Any) -> Any:
+    def _make_stems(self, stems: Any) -> moderngl.VertexArray | None:
         if stems is None or len(stems[2]) == 0:
             return None
         pos, nrm, tris = stems
@@ -348,26 +344,27 @@ class SceneRenderer:
         verts["p"], verts["n"], verts["uv"] = pos, nrm, (1.0, 0.5)  # u = 1: no midrib band
         verts["front"] = np.round(np.asarray(STEM_FRONT) * 255)
         verts["back"][:, :3] = np.round(np.asarray(STEM_BACK) * 255)
-        prog = self._own(build_program(self.ctx, "leaf_baked.vert", "leaf.frag"))
-        prog["Frame"].binding = FRAME_BINDING
-        vbo = self._own(self.ctx.buffer(verts.tobytes()))
-        ibo = self._own(self.ctx.buffer(np.asarray(tris, np.uint32).tobytes()))
-        return self._own(self.ctx.vertex_array(prog, [(vbo, "3f 3f 2f 4f1 4f1", "in_position", "in_normal",
-                                                       "in_uv", "in_front", "in_back")],
-                                               index_buffer=ibo, index_element_size=4))
+        prog = self.resources.baked_program()
+        vbo = self._objects.own(self.ctx.buffer(verts.tobytes()))
+        ibo = self._objects.own(self.ctx.buffer(np.asarray(tris, np.uint32).tobytes()))
+        vao: moderngl.VertexArray = self._objects.own(self.ctx.vertex_array(
+            prog, [(vbo, "3f 3f 2f 4f1 4f1", "in_position", "in_normal", "in_uv", "in_front", "in_back")],
+            index_buffer=ibo, index_element_size=4))
+        return vao
 
     # -- per frame ---------------------------------------------------------------------------
     def set_camera(self, camera: Camera, size: tuple[int, int], *, srgb: bool = True,
                    lighting: type[Lighting] = Lighting) -> None:
         self.camera, self.size = camera, (int(size[0]), int(size[1]))
-        fill_frame(self._frame, camera, srgb=srgb, lighting=lighting)
-        self.frame_ubo.write(self._frame.tobytes())
+        self.frame.set_camera(camera, srgb=srgb, lighting=lighting)
 
     def _set_cull_uniforms(self, settings: CullSettings) -> None:
         """Camera and settings uniforms of the culling pass: once per frame, for every batch."""
         cam = self.camera
         s = self.cull
-        s["planes"].write(frustum_planes(cam.proj @ cam.view).astype(np.float32).tobytes())
+        planes = s["planes"]
+        assert isinstance(planes, moderngl.Uniform)
+        planes.write(frustum_planes(cam.proj @ cam.view).astype(np.float32).tobytes())
         s["eye"] = tuple(float(x) for x in (cam.eye if cam.perspective else (*cam.eye[:3], 0.0)))
         s["pixel_scale"] = _pixel_scale(cam, self.size)
         s["min_pixels"] = settings.min_pixels
@@ -389,14 +386,17 @@ class SceneRenderer:
         self.ctx.memory_barrier(moderngl.COMMAND_BARRIER_BIT | moderngl.VERTEX_ATTRIB_ARRAY_BARRIER_BIT
                                 | moderngl.SHADER_STORAGE_BARRIER_BIT)
 
+    def _bind_tables(self) -> None:
+        self.frame.bind()
+        self.jitter.use()
+        self.ripples.bind()
+
     def draw(self, settings: CullSettings = CullSettings()) -> None:
         """Cull and draw every batch (and the stems) into the bound framebuffer."""
         self.ctx.enable_only(moderngl.DEPTH_TEST)
-        self.frame_ubo.bind_to_uniform_block(FRAME_BINDING)
+        self._bind_tables()
         if self.stems is not None:
             self.stems.render(moderngl.TRIANGLES)
-        self.jitter_tex.use(location=0)
-        self.ripples.bind()
         self._set_cull_uniforms(settings)
         for batch in self.batches:
             self._cull(batch)
@@ -428,65 +428,57 @@ class SceneRenderer:
 
     def capture(self, leaves: Sequence[int], level: int = 0) -> NDArray[np.float32]:
         """Leaf-space positions that ``leaf.vert`` computes for the given leaves at ``level``'s
-        grid (transform feedback of the drawing program): (len(leaves), nu·nv, 3). A
-        framebuffer must be bound."""
-        nu, nv = self.grids[level]
-        out_rows = []
-        self.jitter_tex.use(location=0)
-        self.ripples.bind()
-        self.frame_ubo.bind_to_uniform_block(FRAME_BINDING)
-        for i in leaves:
-            b = next(b for b in self.batches if b.start <= i < b.start + b.count)
-            b.rows.bind_to_storage_buffer(LEAVES_BINDING)
-            ids = self.ctx.buffer(np.array([i - b.start], np.uint32).tobytes())
-            out = self.ctx.buffer(reserve=nu * nv * 24)
-            uv = self.ctx.buffer(grid_uv(nu, nv).tobytes())
-            vao = self.ctx.vertex_array(self.program, [(uv, "2f", "in_uv"), (ids, "1u/i", "in_leaf")])
-            try:
-                vao.transform(out, mode=moderngl.POINTS, vertices=nu * nv, instances=1)
-                out_rows.append(np.frombuffer(out.read(), np.float32).reshape(nu * nv, 6)[:, :3].copy())
-            finally:
-                for obj in (vao, uv, out, ids):
-                    obj.release()
-        return np.stack(out_rows)
+        grid (transform feedback of the drawing program, one instanced capture per batch):
+        (len(leaves), nu·nv, 3). The framebuffer binding is left as it was."""
+        picks = np.asarray(list(leaves), dtype=np.int64).reshape(-1)
+        if picks.size and (picks.min() < 0 or picks.max() >= len(self.scene)):
+            raise IndexError(f"leaf index out of range 0..{len(self.scene) - 1}")
+        grid = self.resources.grid(*self.grids[level])
+        nverts = grid.vertices
+        order: list[NDArray[np.int64]] = []
+        self._bind_tables()
+        with self.resources.capture.recording(picks.size * nverts) as rec:
+            for b in self.batches:
+                mine = np.flatnonzero((picks >= b.start) & (picks < b.start + b.count))
+                if not mine.size:
+                    continue
+                ids = self.ctx.buffer((picks[mine] - b.start).astype(np.uint32).tobytes())
+                vao = self.ctx.vertex_array(self.program, [(grid.vbo, "2f", "in_uv"), (ids, "1u/i", "in_leaf")])
+                try:
+                    b.rows.bind_to_storage_buffer(LEAVES_BINDING)
+                    rec.add(vao, nverts, instances=mine.size)
+                finally:
+                    vao.release()
+                    ids.release()
+                order.append(mine)
+            pos, _ = rec.read()
+        out = np.empty((picks.size, nverts, 3), np.float32)
+        if order:
+            out[np.concatenate(order)] = pos.reshape(-1, nverts, 3)
+        return out
 
     def render(self, camera: Camera, size: tuple[int, int], settings: CullSettings = CullSettings(), *,
                samples: int = 4, background: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
                ) -> NDArray[np.uint8]:
-        """One frame offscreen: (h, w, 4) uint8 straight-alpha RGBA, row 0 at the top."""
+        """One frame offscreen: (h, w, 4) uint8 RGBA, row 0 at the top (a render target of the
+        shared resources, resolved when multisampled)."""
         ctx = self.ctx
-        objs: list[Any] = []
-        try:
-            color = ctx.renderbuffer(size, 4); objs.append(color)
-            depth = ctx.depth_renderbuffer(size); objs.append(depth)
-            fbo = ctx.framebuffer([color], depth); objs.append(fbo)
-            draw_fbo = fbo
-            if samples:
-                mc = ctx.renderbuffer(size, 4, samples=samples); objs.append(mc)
-                md = ctx.depth_renderbuffer(size, samples=samples); objs.append(md)
-                draw_fbo = ctx.framebuffer([mc], md); objs.append(draw_fbo)
-            draw_fbo.use()
-            ctx.viewport = (0, 0, *size)
-            draw_fbo.clear(*background, depth=1.0)
-            self.set_camera(camera, size)
-            self.draw(settings)
-            if draw_fbo is not fbo:
-                ctx.copy_framebuffer(fbo, draw_fbo)
-            image = read_rgba(fbo)
-            check_error(ctx, "scene frame")
-            return image
-        finally:
-            ctx.detect_framebuffer(0).use()
-            while objs:
-                objs.pop().release()
+        size = (int(size[0]), int(size[1]))
+        target = self.resources.target(size, min(int(samples), int(ctx.max_samples)))
+        target.use()
+        ctx.viewport = (0, 0, *size)
+        target.clear(background)
+        self.set_camera(camera, size)
+        self.draw(settings)
+        image: NDArray[np.uint8] = target.read()
+        check_error(ctx, "scene frame")
+        return image
 
     def release(self) -> None:
         """Release every GL object (idempotent)."""
         while self.batches:
             self.batches.pop().release()
-        while self.objects:
-            obj = self.objects.pop()
-            obj.release()
+        self._objects.release()
 
     def __enter__(self) -> SceneRenderer:
         return self
@@ -509,9 +501,6 @@ def lod_switch_error(ctx: moderngl.Context, presets: Sequence[str], settings: Cu
     """Largest outline change, in pixels, when a leaf switches level: each preset's leaf is drawn
     top-down at the exact size where the culling pass switches it from level k to k + 1, once at
     each level (no MSAA), and the Hausdorff distance between the two coverage masks is taken."""
-    from scipy.ndimage import distance_transform_edt
-
-
     worst = 0.0
     for name in presets:
         params = LeafParams.load(resolve_preset(name))
@@ -527,8 +516,6 @@ def lod_switch_error(ctx: moderngl.Context, presets: Sequence[str], settings: Cu
                 w, h = (int(np.ceil((hi[i] - lo[i]) * ppu)) + 8 for i in (0, 1))
                 if max(w, h) > 4096:
                     continue  # switch happens above any image size we draw single leaves at
-                import pyrr
-
                 view_m = np.eye(4)
                 view_m[:3, 3] = (-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -(hi[2] + 1.0))
                 proj = pyrr.matrix44.create_orthogonal_projection(-w / (2 * ppu), w / (2 * ppu), -h / (2 * ppu),

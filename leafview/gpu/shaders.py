@@ -1,6 +1,9 @@
 """GLSL loading: ``#include "file"`` with a depth cap and ``#line`` markers, and compile/link
 errors turned into :class:`ShaderError` naming the stage, the file and the line.
 
+Every program gets the binding points of :mod:`leafview.gpu.layout` as ``#define``s right after
+``#version`` (``layout(std430, binding = LEAVES_BINDING)``), then the caller's feature defines.
+
 Drivers disagree on the source-string number of ``#line`` (Mesa drops it), so the loader
 encodes the file in the line number itself: line ``L`` of the k-th file becomes
 ``k · 100000 + L``. The error parser decodes it back to ``file:line``.
@@ -16,7 +19,7 @@ from pathlib import Path
 import moderngl
 
 from leafview.errors import ShaderError
-from leafview.gpu.layout import generated_sources
+from leafview.gpu.layout import binding_defines, generated_sources
 from leafview.resources import shader_dir
 
 __all__ = ["ShaderError", "ShaderSource", "preprocess", "build_program", "build_compute"]
@@ -70,11 +73,17 @@ def preprocess(name: str, *, defines: Mapping[str, object] | None = None, root: 
                extra: Mapping[str, str] | None = None) -> ShaderSource:
     """Resolve includes of ``name`` (relative to ``root``, default the package's shaders/).
 
-    ``defines`` are inserted after ``#version``; ``extra`` maps virtual file names to text (the
-    generated layout blocks are always available as ``generated/*.glsl``).
+    The binding points of the layout, then ``defines``, are inserted after ``#version``;
+    ``extra`` maps virtual file names to text (the generated layout blocks are always available
+    as ``generated/*.glsl``).
     """
     root = root or shader_dir()
     virtual = {**generated_sources(), **(extra or {})}
+    injected: dict[str, object] = dict(binding_defines())
+    clash = sorted(set(injected) & set(defines or {}))
+    if clash:
+        raise ValueError(f"the binding points of leafview.gpu.layout cannot be redefined: {', '.join(clash)}")
+    injected.update(defines or {})
     src = ShaderSource("")
     out: list[str] = []
 
@@ -102,7 +111,7 @@ def preprocess(name: str, *, defines: Mapping[str, object] | None = None, root: 
                     raise ShaderError("preprocess", f"{fname}:{n}", "#version inside an included file")
                 out.pop()  # #version must come first
                 out.append(line)
-                for key, value in (defines or {}).items():
+                for key, value in injected.items():
                     out.append(f"#define {key} {value}")
                 out.append(f"#line {idx * _LINE_STRIDE + n + 1}")
             else:
@@ -141,7 +150,7 @@ def build_program(ctx: moderngl.Context, vertex: str, fragment: str | None = Non
         return ctx.program(
             vertex_shader=sources["vertex"].text,
             fragment_shader=sources["fragment"].text if fragment else None,
-            varyings=list(varyings),
+            varyings=tuple(varyings),
         )
     except moderngl.Error as exc:
         _raise_from(exc, sources)

@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
@@ -16,49 +17,45 @@ from leafview.core.defaults import DETAIL_GRID
 from leafview.core.params import LeafParams
 from leafview.gpu import default_renderer
 from leafview.gpu.context import check_error
-from leafview.gpu.instanced import InstancedLeaves, OffscreenTarget
+from leafview.gpu.instanced import InstancedLeaves
 from leafview.gpu.layout import pack_leaves, ripple_keys
-from leafview.gpu.renderer import _unpremultiply
-from leafview.scene.camera import frame_view
+from leafview.gpu.renderer import LeafRenderer
+from leafview.gpu.targets import unpremultiply
+from leafview.scene.camera import Camera, frame_view
 
 __all__ = ["render_leaves", "render_lobed"]
 
 
-
 def render_leaves(leaves: Sequence[LeafParams], size: tuple[int, int] = (256, 256), view: str = "top",
                   *, grid: tuple[int, int] = DETAIL_GRID, samples: int | None = None,
-                  flat: bool = False, renderer: Any = None, camera: Any = None) -> NDArray[np.uint8]:
+                  flat: bool = False, renderer: LeafRenderer | None = None,
+                  camera: Camera | None = None) -> NDArray[np.uint8]:
     """Draw ``leaves`` (world placement from each one's transform) into one (h, w, 4) uint8 sRGB
     image with a transparent background, framed like :meth:`LeafRenderer.render` (top view: no
     multisampling; other views 4×), or by ``camera`` (:func:`leafview.scene.camera.frame_view`) when
-    given. ``flat``: unlit colours (tests)."""
-    import moderngl
-
-
-    ctx = (renderer or default_renderer()).ctx
+    given. ``flat``: unlit colours (tests). Draws with ``renderer``'s shared resources (default:
+    the shared headless renderer's)."""
+    resources = (renderer or default_renderer()).resources
+    ctx = resources.ctx
     w, h = int(size[0]), int(size[1])
     if samples is None:
         samples = 0 if view == "top" else 4
     samples = min(samples, ctx.max_samples)
     records, tables = pack_leaves(leaves)
-    with InstancedLeaves(ctx, records, grid, jitter_tables=tables, ripple_signals=ripple_keys(leaves)) as inst, \
-            OffscreenTarget(ctx, (w, h), samples) as target, OffscreenTarget(ctx, (w, h)) as resolved:
-        target.use()
+    with InstancedLeaves(ctx, records, grid, jitter_tables=tables, ripple_signals=ripple_keys(leaves),
+                         resources=resources) as inst:
         pos, _ = inst.capture()
         if camera is None:
             camera = frame_view(view, pos.reshape(-1, 3).astype(np.float64), (w, h))
         inst.set_camera(camera, flat=flat)
+        target = resources.target((w, h), samples)
         target.use()
         target.clear()
         inst.draw()
-        if samples:
-            ctx.copy_framebuffer(resolved.fbo, target.fbo)
-            img = resolved.read()
-        else:
-            img = target.read()
+        img: NDArray[np.uint8] = target.read()
         check_error(ctx, "multilobed leaf")
         ctx.disable(moderngl.DEPTH_TEST)
-    return _unpremultiply(img) if samples else img
+    return unpremultiply(img) if samples else img
 
 
 def render_lobed(lobed: LobedLeaf, size: tuple[int, int] = (256, 256), view: str = "top", **kwargs: Any

@@ -1,0 +1,112 @@
+"""Offscreen render targets: colour + depth, optionally multisampled with a single-sample resolve
+target, and the readback helpers (row 0 at the top, straight alpha).
+
+One class for every framebuffer of the package (thumbnails, atlases, scenes, the viewer's frame,
+benchmarks), created in one place and released in one place.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import moderngl
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["RenderTarget", "OffscreenTarget", "read_rgba", "unpremultiply"]
+
+
+def read_rgba(fbo: moderngl.Framebuffer) -> NDArray[np.uint8]:
+    """(h, w, 4) uint8, row 0 at the top."""
+    w, h = fbo.size
+    img = np.frombuffer(fbo.read(components=4), np.uint8).reshape(h, w, 4)
+    return np.ascontiguousarray(img[::-1])
+
+
+def unpremultiply(img: NDArray[np.uint8]) -> NDArray[np.uint8]:
+    """Resolved multisampled edges over a transparent clear are premultiplied (colour · coverage);
+    8-bit images carry straight alpha, so divide the coverage back out."""
+    alpha = img[..., 3:4].astype(np.float32)
+    partial = (alpha > 0) & (alpha < 255)
+    if not partial.any():
+        return img
+    out = img.copy()
+    rgb = np.clip(img[..., :3].astype(np.float32) * 255.0 / np.maximum(alpha, 1.0) + 0.5, 0, 255)
+    out[..., :3] = np.where(partial, rgb, img[..., :3]).astype(np.uint8)
+    return out
+
+
+class RenderTarget:
+    """An RGBA (8-bit, or float32 with ``linear``) + depth framebuffer of ``size``; with
+    ``samples`` > 0 the draws go to a multisampled framebuffer that :meth:`resolve` copies into
+    the single-sample one.
+
+    ``fbo`` is the framebuffer to draw into, ``resolved`` the one to read. ``release()`` first
+    binds framebuffer 0: moderngl re-binds the *current* framebuffer after creating a new one,
+    so a deleted-but-current framebuffer would make the next ``ctx.framebuffer()`` raise
+    GL_INVALID_OPERATION.
+    """
+
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int], samples: int = 0, *,
+                 linear: bool = False) -> None:
+        self.ctx, self.size = ctx, (int(size[0]), int(size[1]))
+        self.samples, self.linear = int(samples), bool(linear)
+        dtype = "f4" if linear else "f1"
+        self._objects: list[Any] = []
+        try:
+            color = self._own(ctx.renderbuffer(self.size, 4, dtype=dtype))
+            depth = self._own(ctx.depth_renderbuffer(self.size))
+            self.resolved: moderngl.Framebuffer = self._own(ctx.framebuffer([color], depth))
+            self.fbo: moderngl.Framebuffer = self.resolved
+            if self.samples:
+                mcolor = self._own(ctx.renderbuffer(self.size, 4, samples=self.samples, dtype=dtype))
+                mdepth = self._own(ctx.depth_renderbuffer(self.size, samples=self.samples))
+                self.fbo = self._own(ctx.framebuffer([mcolor], mdepth))
+        except BaseException:
+            self.release()
+            raise
+
+    def _own(self, obj: Any) -> Any:
+        self._objects.append(obj)
+        return obj
+
+    def use(self) -> None:
+        """Bind the framebuffer to draw into (its viewport: the whole target)."""
+        self.fbo.use()
+
+    def clear(self, rgba: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> None:
+        r, g, b, a = (float(x) for x in rgba)
+        self.fbo.clear(r, g, b, a, depth=1.0)
+
+    def resolve(self) -> moderngl.Framebuffer:
+        """Copy the multisampled draws into ``resolved`` (nothing to do without samples)."""
+        if self.fbo is not self.resolved:
+            self.ctx.copy_framebuffer(self.resolved, self.fbo)
+        return self.resolved
+
+    def read(self, viewport: tuple[int, int, int, int] | None = None, *, copy: bool = True) -> NDArray[Any]:
+        """Resolve and read back: (h, w, 4) uint8 (or float32 if ``linear``), row 0 at the top.
+        Colours at multisampled edges over a transparent clear are premultiplied (see
+        :func:`unpremultiply`). ``copy=False`` returns a read-only view of the readback (callers
+        that cut it into tiles copy only the tiles)."""
+        fbo = self.resolve()
+        x, y, w, h = viewport if viewport is not None else (0, 0, *self.size)
+        dtype, gl_dtype = (np.float32, "f4") if self.linear else (np.uint8, "f1")
+        raw = fbo.read(viewport=(x, y, w, h), components=4, dtype=gl_dtype, alignment=1)
+        image = np.frombuffer(raw, dtype).reshape(h, w, 4)[::-1]
+        return np.ascontiguousarray(image) if copy else image
+
+    def release(self) -> None:
+        if self._objects:
+            self.ctx.detect_framebuffer(0).use()
+        while self._objects:
+            self._objects.pop().release()
+
+    def __enter__(self) -> RenderTarget:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+OffscreenTarget = RenderTarget   # the name the benchmarks and tests know
