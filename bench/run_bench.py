@@ -6,7 +6,7 @@ Usage, from the repository root with leafview installed (``pip install -e .[benc
     python bench/run_bench.py            # readable table (full run, well under a minute)
     python bench/run_bench.py --json     # the results as JSON
     python bench/run_bench.py --quick    # small counts: a smoke run of a few seconds
-    python bench/run_bench.py all        # every suite (core, and scene/shapes/export where present)
+    python bench/run_bench.py all        # every suite (core, scene, shapes, export)
 
 Needs OpenGL 4.5 through EGL (Mesa llvmpipe works without a GPU) and matplotlib for the
 baseline. Numbers are timings on *this* machine; the GL renderer is printed with them.
@@ -14,7 +14,7 @@ baseline. Numbers are timings on *this* machine; the GL renderer is printed with
 
 import sys
 
-from leafview.bench.core import main
+from leafview.cli import main
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(main(["bench", *sys.argv[1:]]))

@@ -14,44 +14,40 @@ Measured (see :func:`run` for the keys):
   (:class:`~leafview.gpu.instanced.BakedLeaves`, one indexed draw);
 * bytes per leaf of a baked 32×64 mesh against the parameter record.
 
-Run: ``leafview bench [--json] [--quick]`` or ``python bench/run_bench.py``.
+Run: ``leafview bench [--json] [--quick]`` or ``python bench/run_bench.py``; timings with
+:mod:`leafview.bench.timing`, the instancing measurement in :mod:`leafview.bench.instancing`.
 """
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
 import platform
 import statistics
-import sys
-import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
+import moderngl
 import numpy as np
 
 from leafview._version import __version__
+from leafview.bench import PAPER_LEAVES_PER_S, THUMB_GRID, THUMB_SIZE
+from leafview.bench.instancing import BYTES_GRID, SCENE_GRID, SCENE_SIZE, bytes_per_leaf, instanced_vs_baked
 from leafview.bench.latency import measure_edit_latency
+from leafview.bench.timing import Progress, bench_context, gl_info, median_time
 from leafview.core.params import Bending, Jitter, LeafParams, Shape
 from leafview.deform.fbm import RIPPLE_SAMPLES
 from leafview.deform.surface import evaluate, grid_uv, tessellate
-from leafview.gpu.context import GLUnavailable, check_error, create_headless_context
-from leafview.gpu.instanced import BakedLeaves, InstancedLeaves, OffscreenTarget, pack_leaves, read_rgba, scatter_leaves
-from leafview.gpu.layout import LEAF_BLOCK
+from leafview.gpu.context import check_error
+from leafview.gpu.instanced import OffscreenTarget
 from leafview.gpu.renderer import LeafRenderer
 from leafview.gpu.ripple import RipplePass
 from leafview.resources import builtin_presets
 from leafview.scene.camera import frame_view
 
-__all__ = ["run", "main", "GOALS", "PAPER_LEAVES_PER_S"]
+__all__ = ["run", "format_table", "thumbnail_params", "GOALS", "PAPER_LEAVES_PER_S", "THUMB_SIZE",
+           "THUMB_GRID"]
 
-PAPER_LEAVES_PER_S = 550.0  # Garg & Leow 2011: ~550 leaf instances/s on a quad-core laptop
-THUMB_SIZE = (128, 128)
-THUMB_GRID = (32, 64)
-SCENE_GRID = (9, 15)        # 2·8·14 = 224 triangles per leaf
-SCENE_SIZE = (512, 512)
-BYTES_GRID = (32, 64)
 
 # goals (reported, never asserted): key -> minimum
 GOALS = {
@@ -72,50 +68,6 @@ _CONFIG = {
 }
 
 
-class _Progress:
-    """Step names on stderr, only when stderr is a terminal."""
-
-    def __init__(self, total: int) -> None:
-        self.enabled = sys.stderr.isatty()
-        self.total, self.done = total, 0
-
-    def step(self, what: str) -> None:
-        self.done += 1
-        if self.enabled:
-            sys.stderr.write(f"\r\033[K[{self.done}/{self.total}] {what}")
-            sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.enabled:
-            sys.stderr.write("\r\033[K")
-            sys.stderr.flush()
-
-
-def _median_time(fn: Callable[[], Any], repeats: int, finish: Callable[[], None] | None = None) -> float:
-    """Median wall time of ``fn`` over ``repeats`` runs (``finish`` before the clock stops)."""
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        if finish is not None:
-            finish()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
-
-
-def bytes_per_leaf() -> dict[str, Any]:
-    """Bytes of a baked BYTES_GRID leaf mesh (f32 position, normal, uv; u32 indices) against the
-    leaf record: its host-set parameter fields, and the whole record with derived data."""
-
-    nu, nv = BYTES_GRID
-    verts, tri_count = nu * nv, 2 * (nu - 1) * (nv - 1)
-    baked = verts * (3 + 3 + 2) * 4 + tri_count * 3 * 4
-    return {"baked_bytes_per_leaf": baked, "param_bytes_per_leaf": LEAF_BLOCK.parameter_nbytes,
-            "record_bytes_per_leaf": LEAF_BLOCK.nbytes,
-            "baked_vs_param_bytes": baked / LEAF_BLOCK.parameter_nbytes,
-            "baked_vs_record_bytes": baked / LEAF_BLOCK.nbytes}
-
-
 def thumbnail_params(k: int) -> list[Any]:
     """``k`` distinct single leaves at the origin: plain, serrated, cupped, curved axis, …"""
 
@@ -133,16 +85,15 @@ def thumbnail_params(k: int) -> list[Any]:
 
 def _mpl_thumbnail(params: Any) -> np.ndarray:
     """matplotlib baseline: plot_trisurf of tessellate(params, 32, 64), 128×128 px RGBA."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.backends.backend_agg import FigureCanvasAgg  # optional: leafview[bench]
     from matplotlib.figure import Figure
-
 
     mesh = tessellate(params, *THUMB_GRID)
     m = params.transform.matrix()
     p = mesh.vertices @ m[:3, :3].T + m[:3, 3]
     fig = Figure(figsize=(THUMB_SIZE[0] / 100, THUMB_SIZE[1] / 100), dpi=100)
     canvas = FigureCanvasAgg(fig)
-    ax = fig.add_axes((0.0, 0.0, 1.0, 1.0), projection="3d")
+    ax: Any = fig.add_axes((0.0, 0.0, 1.0, 1.0), projection="3d")   # mplot3d Axes3D
     front = np.asarray(params.material.front)
     srgb = np.where(front <= 0.0031308, 12.92 * front, 1.055 * front ** (1 / 2.4) - 0.055)
     ax.plot_trisurf(p[:, 0], p[:, 1], p[:, 2], triangles=mesh.indices, color=tuple(srgb),
@@ -159,53 +110,7 @@ def _mpl_thumbnail(params: Any) -> np.ndarray:
     return img
 
 
-def _scene(ctx: Any, n_leaves: int, repeats: int, progress: _Progress) -> dict[str, Any]:
-    """Median seconds per frame of ``n_leaves`` scattered leaves, instanced vs baked."""
-
-    params = scatter_leaves(n_leaves, seed=1)
-    records, tables = pack_leaves(params)
-    with OffscreenTarget(ctx, SCENE_SIZE) as target:
-        fbo = target.fbo
-        fbo.use()
-        with InstancedLeaves(ctx, records, SCENE_GRID, jitter_tables=tables) as inst:
-            # bake by capturing the instanced vertex shader: bit-identical vertices, and seconds
-            # faster than 10⁴ numpy tessellations (the tests compare both bakes)
-            pos, nrm = inst.capture()
-            camera = frame_view("three-quarter", pos.reshape(-1, 3), SCENE_SIZE)
-            with BakedLeaves(ctx, pos, nrm, SCENE_GRID, records["front"],
-                             records["back"][:, :3]) as baked:
-                del pos, nrm
-                check_error(ctx, "scene setup")
-                images = []
-                for batch in (inst, baked):  # warm-up: JIT-compiles the shader variants
-                    batch.set_camera(camera)
-                    fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-                    batch.draw()
-                    check_error(ctx, f"{type(batch).__name__}.draw")
-                    images.append(read_rgba(fbo))
-
-                def frame(batch: Any) -> Callable[[], None]:
-                    def go() -> None:
-                        fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-                        batch.draw()
-                    return go
-
-                progress.step("instanced vs baked leaves")
-                t_inst, t_baked = [], []
-                for _ in range(repeats):  # interleaved, so drift hits both alike
-                    t_inst.append(_median_time(frame(inst), 1, ctx.finish))
-                    t_baked.append(_median_time(frame(baked), 1, ctx.finish))
-                check_error(ctx, "scene draws")
-                tris = inst.triangles_per_leaf
-    a, b = (im.astype(np.int16) for im in images)
-    ratios = sorted(b / a for a, b in zip(t_inst, t_baked))  # per interleaved pair
-    return {"t_instanced": statistics.median(t_inst), "t_baked": statistics.median(t_baked),
-            "ratio": statistics.median(ratios), "ratio_range": (ratios[0], ratios[-1]),
-            "mean_abs_diff": float(np.abs(a - b).mean()),
-            "coverage": float((images[0][..., 3] > 0).mean()), "triangles_per_leaf": tris}
-
-
-def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
+def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, Any]:
     """Run every benchmark in this process; returns a flat dict (see the module docstring).
 
     ``ctx``: an existing moderngl context to measure on (kept open); default a new headless
@@ -220,19 +125,12 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
     ``viewer_edit_upload_bytes``; see :mod:`leafview.bench.latency`), and the configuration:
     counts, grids, versions, ``cpu_count``.
     """
-    import matplotlib
-    import moderngl
-
+    import matplotlib  # optional: leafview[bench]
 
     cfg = _CONFIG[bool(quick)]
-    progress = _Progress(7)
     res: dict[str, Any] = {}
-    own_ctx = ctx is None
-    if own_ctx:
-        ctx = create_headless_context()
-    try:
-        res["gl_renderer"] = str(ctx.info["GL_RENDERER"])
-        res["gl_version"] = str(ctx.info["GL_VERSION"])
+    with bench_context(ctx) as ctx, Progress(7) as progress:
+        res.update(gl_info(ctx))
 
         # -- thumbnails: LeafRenderer vs matplotlib, same params, same mesh --------------------
         thumbs = thumbnail_params(cfg["thumb_params"])
@@ -244,7 +142,7 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
                 renderer.render_many(batch, THUMB_SIZE, view, grid=THUMB_GRID)
             check_error(ctx, "thumbnail warm-up")
 
-            def batched(view: str) -> Callable[[], None]:
+            def batched(view: str) -> Callable[[], Any]:
                 return lambda: renderer.render_many(batch, THUMB_SIZE, view, grid=THUMB_GRID)
 
             def single() -> None:
@@ -252,9 +150,9 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
                     renderer.render(p, THUMB_SIZE, "top", grid=THUMB_GRID)
 
             progress.step("GL thumbnails")
-            t_gl = _median_time(batched("top"), cfg["thumb_repeats"], ctx.finish)
-            t_single = _median_time(single, cfg["thumb_repeats"], ctx.finish)
-            t_3q = _median_time(batched("three-quarter"), cfg["thumb_repeats"], ctx.finish)
+            t_gl = median_time(batched("top"), cfg["thumb_repeats"], ctx.finish)
+            t_single = median_time(single, cfg["thumb_repeats"], ctx.finish)
+            t_3q = median_time(batched("three-quarter"), cfg["thumb_repeats"], ctx.finish)
             check_error(ctx, "thumbnails")
         res["thumbnails_per_s_single"] = n_gl / t_single
         res["thumbnails_per_s_three_quarter"] = n_gl / t_3q
@@ -269,14 +167,14 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
                     _mpl_thumbnail(p)
 
         n_mpl = cfg["mpl_passes"] * len(thumbs)
-        t_mpl = _median_time(mpl_pass, cfg["mpl_repeats"])
+        t_mpl = median_time(mpl_pass, cfg["mpl_repeats"])
         res["matplotlib_thumbnails_per_s"] = n_mpl / t_mpl
         res["thumbnail_speedup"] = res["thumbnails_per_s"] / res["matplotlib_thumbnails_per_s"]
 
         # -- many leaves: parameters (instanced) vs baked meshes, identical triangles ----------
         progress.step(f"scene setup ({cfg['leaves']} leaves)")
         n_leaves = cfg["leaves"]
-        scene = _scene(ctx, n_leaves, cfg["scene_repeats"], progress)
+        scene = instanced_vs_baked(ctx, n_leaves, cfg["scene_repeats"], progress)
         res["instanced_leaves_per_s"] = n_leaves / scene["t_instanced"]
         res["baked_leaves_per_s"] = n_leaves / scene["t_baked"]
         # median over interleaved pairs of (baked time / instanced time): drift cancels per pair
@@ -296,17 +194,12 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
 
         # -- the viewer: a frame that carries an edit ÷ a steady frame (leafview.bench.latency) ----
         progress.step("viewer edit latency")
-
         res.update(measure_edit_latency(ctx, pairs=5 if quick else 30, warmup=2 if quick else 5))
 
         # -- against the paper: the instanced path at ~220 triangles per leaf (same run) --------
         res["leaves_per_s_220tri"] = res["instanced_leaves_per_s"]
         res["triangles_per_leaf"] = tris
         res["vs_paper_550"] = res["leaves_per_s_220tri"] / PAPER_LEAVES_PER_S
-    finally:
-        progress.close()
-        if own_ctx:
-            ctx.release()
 
     res.update({
         "quick": bool(quick),
@@ -321,7 +214,7 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
         "cpu_count": os.cpu_count() or 0,
         "python": platform.python_version(),
         "numpy": np.__version__,
-        "moderngl": moderngl.__version__,
+        "moderngl": moderngl.__version__,  # type: ignore[attr-defined]
         "matplotlib": matplotlib.__version__,
         "leafview": __version__,
         "platform": platform.platform(),
@@ -345,19 +238,16 @@ RIPPLE_GRID = (65, 257)
 RIPPLE_SIZE = (512, 512)
 
 
-def _ripples(ctx: Any, repeats: int) -> dict[str, Any]:
+def _ripples(ctx: moderngl.Context, repeats: int) -> dict[str, Any]:
     """Frame time of one rippled leaf ÷ the same leaf and grid without ripples (interleaved
     pairs), and the time to re-synthesise ripple signals after a β or seed change."""
-    from dataclasses import replace
-
-
     on = LeafParams.load(builtin_presets()["maize"]).replace(bending=Bending())
     off = on.replace(ripple=replace(on.ripple, enabled=False))
     with LeafRenderer(ctx) as renderer, OffscreenTarget(ctx, RIPPLE_SIZE) as target:
         uv = grid_uv(*RIPPLE_GRID)
         renderer.set_camera(frame_view("three-quarter", evaluate(on, uv[:, 0], uv[:, 1]), RIPPLE_SIZE), srgb=True)
 
-        def frame(params: Any) -> Callable[[], None]:
+        def frame(params: LeafParams) -> Callable[[], None]:
             def go() -> None:
                 renderer.set_leaf(params)
                 target.use()
@@ -370,8 +260,8 @@ def _ripples(ctx: Any, repeats: int) -> dict[str, Any]:
             ctx.finish()
         ratios = []
         for _ in range(max(repeats, 3)):
-            t_on = _median_time(frame(on), 3, ctx.finish)
-            t_off = _median_time(frame(off), 3, ctx.finish)
+            t_on = median_time(frame(on), 3, ctx.finish)
+            t_off = median_time(frame(off), 3, ctx.finish)
             ratios.append(t_on / t_off)
         check_error(ctx, "ripple frames")
     rp = RipplePass(ctx)
@@ -379,8 +269,8 @@ def _ripples(ctx: Any, repeats: int) -> dict[str, Any]:
         rp.update([(0, 1.0)])
         ctx.finish()
         seeds = iter(range(1, 10**6))
-        t_one = _median_time(lambda: rp.update([(next(seeds), 1.0)]), 9, ctx.finish)
-        t_many = _median_time(lambda: rp.update([(next(seeds), 1.0 + (i % 7) * 0.25) for i in range(1000)]),
+        t_one = median_time(lambda: rp.update([(next(seeds), 1.0)]), 9, ctx.finish)
+        t_many = median_time(lambda: rp.update([(next(seeds), 1.0 + (i % 7) * 0.25) for i in range(1000)]),
                               3, ctx.finish)
     finally:
         rp.release()
@@ -449,61 +339,3 @@ def format_table(res: dict[str, Any]) -> str:
     lines.append("(timings: median of repeats, ctx.finish() before the clock stops; param/baked: median "
                  "of interleaved pairs; goals are reported, never asserted)")
     return "\n".join(lines)
-
-
-# Benchmark suites: name -> (module, run function, table function). ``run(quick, ctx)`` returns a
-# JSON-able dict with ``gl_renderer``; ``table(res)`` the readable report. "core" is this module.
-SUITES: dict[str, tuple[str, str, str]] = {
-    "core": ("leafview.bench.core", "run", "format_table"),
-    "export": ("leafview.bench.export", "run", "format_table"),
-    "scene": ("leafview.bench.scene", "run", "format_table"),
-    "shapes": ("leafview.bench.shapes", "run", "format_table"),
-}
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The arguments of ``leafview bench`` (shared by the CLI and ``bench/run_bench.py``)."""
-    parser.add_argument("suite", nargs="?", default="core", choices=[*SUITES, "all"],
-                        help="which benchmarks (default core: thumbnails, instancing, ripples, viewer)")
-    parser.add_argument("--json", action="store_true", help="print the results as JSON")
-    parser.add_argument("--quick", action="store_true", help="small counts: a smoke run, not a measurement")
-
-
-def run_args(args: argparse.Namespace) -> int:
-    """Run the suite(s) named in ``args``; exit code 2 when GL or a baseline is missing."""
-    import importlib
-
-
-    names = list(SUITES) if args.suite == "all" else [args.suite]
-    if "core" in names:
-        try:
-            import matplotlib  # noqa: F401  (the thumbnail baseline)
-        except ImportError:
-            print("leafview bench: matplotlib is needed for the baseline: pip install 'leafview[bench]'",
-                  file=sys.stderr)
-            return 2
-    results: dict[str, Any] = {}
-    try:
-        for name in names:
-            module, run_name, table_name = SUITES[name]
-            mod = importlib.import_module(module)
-            res = getattr(mod, run_name)(quick=args.quick)
-            results[name] = res
-            if not args.json:
-                print(getattr(mod, table_name)(res), flush=True)
-    except GLUnavailable as exc:
-        print(f"leafview bench: {exc}", file=sys.stderr)
-        return 2
-    if args.json:
-        print(json.dumps(results[names[0]] if len(names) == 1 else results, indent=2, allow_nan=False))
-    return 0
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="leafview bench", description=__doc__.split("\n\n")[0])
-    add_arguments(parser)
-    return run_args(parser.parse_args(list(sys.argv[1:] if argv is None else argv)))
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

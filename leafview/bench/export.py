@@ -22,12 +22,14 @@ import json
 import sys
 import tempfile
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
+import moderngl
 import numpy as np
 
-from leafview.bench.core import _median_time
+from leafview.bench.timing import log_gl_renderer, median_time
 from leafview.core import compact
 from leafview.core.params import LeafParams, Transform
 from leafview.export import write
@@ -81,7 +83,6 @@ class _StandIn:
 def _scenes(n: int) -> tuple[Any, Any, str, int | None]:
     """(distinct scene, shared scene, description, scene-file bytes or None)."""
     try:
-
         presets = builtin_presets()
         spec = SceneSpec(species=(LeafParams.load(presets["beech"]), LeafParams.load(presets["ovate"])),
                          weights=(2.0, 1.0), layout="field", leaves=n, seed=1, name="bench")
@@ -96,8 +97,9 @@ def _scenes(n: int) -> tuple[Any, Any, str, int | None]:
                 f"stand-in scatter of 4 presets ({type(exc).__name__}: {exc})", None)
 
 
-def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
-
+def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, Any]:
+    """Run the export benchmark on ``ctx`` (default the shared default renderer's context); see
+    the module docstring for what is measured."""
     cfg = _CONFIG[quick]
     renderer = LeafRenderer(ctx) if ctx is not None else default_renderer()
     finish = renderer.ctx.finish
@@ -105,14 +107,14 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
     distinct, shared, source, scene_file = _scenes(n)
     res: dict[str, Any] = {"gl_renderer": renderer.gl_renderer, "leaves": len(distinct), "grid": list(SCENE_GRID),
                            "scene_source": source, "repeats": cfg["repeats"]}
-    print(f"export bench: GL_RENDERER = {renderer.gl_renderer}", file=sys.stderr, flush=True)
+    log_gl_renderer("export", renderer.gl_renderer)
 
     baked: dict[str, ExportScene] = {}
 
     def bake_distinct() -> None:
         baked["distinct"] = scene_from(distinct, SCENE_GRID, renderer=renderer, name="bench")
 
-    res["bake_gpu_s"] = _median_time(bake_distinct, cfg["repeats"], finish)
+    res["bake_gpu_s"] = median_time(bake_distinct, cfg["repeats"], finish)
     baked["shared"] = scene_from(shared, SCENE_GRID, renderer=renderer, name="bench")
     part = baked["distinct"].parts[0]
     res["vertices_per_leaf"], res["triangles_per_leaf"] = part.mesh.n_vertices, part.mesh.n_triangles
@@ -122,14 +124,14 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
 
     sample = distinct.shapes()[: cfg["numpy_leaves"]]
     sub = _Subset(sample)
-    res["bake_numpy_s_per_leaf"] = _median_time(lambda: scene_from(sub, SCENE_GRID, backend="numpy"),
+    res["bake_numpy_s_per_leaf"] = median_time(lambda: scene_from(sub, SCENE_GRID, backend="numpy"),
                                                 cfg["repeats"]) / len(sample)
     res["bake_gpu_ms_per_leaf"] = 1e3 * res["bake_gpu_s"] / res["distinct_shapes"]
     res["numpy_vs_gpu_bake"] = 1e3 * res["bake_numpy_s_per_leaf"] / res["bake_gpu_ms_per_leaf"]
     presets = _Subset([LeafParams.load(p) for p in builtin_presets().values()])   # the 33×65 default grid
-    res["bake_gpu_ms_per_leaf_33x65"] = 1e3 * _median_time(
+    res["bake_gpu_ms_per_leaf_33x65"] = 1e3 * median_time(
         lambda: scene_from(presets, (33, 65), renderer=renderer), cfg["repeats"], finish) / len(presets)
-    res["bake_numpy_ms_per_leaf_33x65"] = 1e3 * _median_time(
+    res["bake_numpy_ms_per_leaf_33x65"] = 1e3 * median_time(
         lambda: scene_from(presets, (33, 65), backend="numpy"), cfg["repeats"]) / len(presets)
 
     formats = [".glb", ".usdc", ".ply"] + ([".obj"] if cfg["obj"] else [])
@@ -137,7 +139,7 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
         for kind in ("distinct", "shared"):
             for suffix in formats if kind == "distinct" else [".glb", ".usdc"]:
                 path = Path(tmp) / f"{kind}{suffix}"
-                seconds = _median_time(lambda k=kind, p=path: write(baked[k], p), cfg["repeats"])
+                seconds = median_time(partial(write, baked[kind], path), cfg["repeats"])
                 key = f"{kind}_{suffix[1:]}"
                 res[f"{key}_s"] = seconds
                 res[f"{key}_bytes"] = path.stat().st_size
@@ -150,7 +152,6 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
         write(leaf_scene(leaf, scene_from(_Subset([leaf]), (33, 65), renderer=renderer).parts[0].mesh), single)
         res["single_leaf_glb_bytes_33x65"] = single.stat().st_size
         res["preset_toml_bytes"] = builtin_presets()["beech"].stat().st_size
-
 
     shapes = distinct.shapes()
     res["leaf_json_bytes"] = float(np.mean([len(json.dumps(p.to_dict(), separators=(",", ":"))) for p in shapes[:200]]))

@@ -6,7 +6,8 @@
   ``ground`` camera (interleaved pairs, median);
 * ``lod_switch_px``: largest outline change in pixels when a leaf switches level;
 * ``param_vs_baked_speed`` and ``baked_vs_param_bytes`` from the core suite's instancing
-  measurement (:func:`leafview.bench.core._scene`), so both suites report the same quantity;
+  measurement (:func:`leafview.bench.instancing.instanced_vs_baked`), so both suites report the
+  same quantity;
 * the 10⁶-leaf field: build, upload and one 1280×720 frame, wall time (not in ``--quick``).
 
 Timings are medians with ``ctx.finish()`` before the clock stops; GL_RENDERER is part of the
@@ -19,9 +20,12 @@ import statistics
 import time
 from typing import Any
 
-from leafview.bench.core import _median_time, _Progress, _scene, bytes_per_leaf
+import moderngl
+
+from leafview.bench.instancing import bytes_per_leaf, instanced_vs_baked
+from leafview.bench.timing import Progress, bench_context, gl_info, median_time
 from leafview.core.params import LeafParams
-from leafview.gpu.context import check_error, create_headless_context
+from leafview.gpu.context import check_error
 from leafview.gpu.instanced import OffscreenTarget
 from leafview.gpu.scene import CullSettings, SceneRenderer, lod_switch_error, scene_camera
 from leafview.resources import resolve_preset
@@ -35,23 +39,19 @@ SIZE = (1280, 720)
 SPECIES = ("ovate", "lanceolate", "elliptic")
 
 
-def _spec(n: int) -> Any:
-
+def _spec(n: int) -> SceneSpec:
     species = tuple(LeafParams.load(resolve_preset(s)) for s in SPECIES)
     return SceneSpec(species=species, leaves=n, seed=1, layout="field")
 
 
-def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
-
+def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, Any]:
+    """Run the scene benchmarks on ``ctx`` (default a new headless context); see the module
+    docstring for what is measured."""
     leaf_counts = (1_000, 5_000) if quick else (1_000, 10_000, 100_000)
-    progress = _Progress(len(leaf_counts) + 3)
-    own = ctx is None
-    if own:
-        ctx = create_headless_context()
-    res: dict[str, Any] = {"gl_renderer": str(ctx.info["GL_RENDERER"]), "gl_version": str(ctx.info["GL_VERSION"]),
-                           "size": list(SIZE), "quick": quick, "species": list(SPECIES), "frames": {}}
     on, off = CullSettings(), CullSettings(cull=False, lod=False)
-    try:
+    with bench_context(ctx) as ctx, Progress(len(leaf_counts) + 3) as progress:
+        res: dict[str, Any] = {**gl_info(ctx), "size": list(SIZE), "quick": quick, "species": list(SPECIES),
+                               "frames": {}}
         with OffscreenTarget(ctx, SIZE) as target:
             for n in leaf_counts:
                 progress.step(f"{n:,} leaves")
@@ -68,15 +68,15 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
 
                         frame()
                         ctx.finish()
-                        t = _median_time(frame, 3 if quick else 5, ctx.finish)
+                        t = median_time(frame, 3 if quick else 5, ctx.finish)
                         counts = r.level_counts()
                         row[view] = {"ms": 1e3 * t, "leaves_per_s": n / t, "drawn": int(counts.sum()),
                                      "levels": [int(c) for c in counts], "triangles": r.triangles(counts)}
                         if view == "ground" and n == leaf_counts[-1]:
                             ratios, t_off = [], []
                             for _ in range(2 if quick else 3):
-                                a = _median_time(lambda: frame(off), 1, ctx.finish)
-                                b = _median_time(frame, 1, ctx.finish)
+                                a = median_time(lambda: frame(off), 1, ctx.finish)
+                                b = median_time(frame, 1, ctx.finish)
                                 ratios.append(a / b)
                                 t_off.append(a)
                             res["lod_speedup"] = statistics.median(ratios)
@@ -88,7 +88,7 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
             res["lod_switch_px"] = lod_switch_error(ctx, ("ovate", "lanceolate", "serrate", "maize"))
             progress.step("parameters vs baked mesh")
             n_pb = 300 if quick else 10_000
-            core = _scene(ctx, n_pb, 2 if quick else 9, progress)
+            core = instanced_vs_baked(ctx, n_pb, 2 if quick else 9, progress)
             res.update(param_vs_baked_speed=core["ratio"], param_vs_baked_range=list(core["ratio_range"]),
                        instanced_leaves_per_s=n_pb / core["t_instanced"], baked_leaves_per_s=n_pb / core["t_baked"],
                        scene_leaves=n_pb, triangles_per_leaf=core["triangles_per_leaf"], **bytes_per_leaf())
@@ -106,14 +106,11 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
                                       "batches": len(r.batches), "drawn": int(counts.sum()),
                                       "triangles": r.triangles(counts)}
                 res["million_leaf_seconds"] = t3 - t0
-    finally:
-        progress.close()
-        if own:
-            ctx.release()
     return res
 
 
 def format_table(res: dict[str, Any]) -> str:
+    """The readable report printed by ``leafview bench scene``."""
     lines = [f"leafview scene benchmark{' (quick)' if res['quick'] else ''}: {res['gl_renderer']} "
              f"({res['gl_version']}), {res['size'][0]}×{res['size'][1]}, species {', '.join(res['species'])}"]
     lines.append(f"{'leaves':>9}  {'camera':<13} {'ms/frame':>9} {'leaves/s':>12} {'drawn':>9}  levels (9×17/5×9/3×5)")

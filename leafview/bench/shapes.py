@@ -1,5 +1,5 @@
 """``leafview bench shapes``: botanical leaves generated (landmark model → Ω fit) and rendered
-per second, against Garg & Leow's ~550 leaf instances/s (Garg & Leow 2011 sec. 4.3, ~220 triangles, a
+per second, against the ~550 leaf instances/s of Garg & Leow 2011, sec. 4.3 (~220 triangles, a
 quad-core laptop).
 
 Measured side by side in one process, medians, ``ctx.finish()`` before the clock stops; nothing
@@ -32,16 +32,18 @@ import statistics
 import time
 from typing import Any
 
+import moderngl
 import numpy as np
 
-from leafview.bench.core import PAPER_LEAVES_PER_S, THUMB_GRID, THUMB_SIZE, _median_time
+from leafview.bench import PAPER_LEAVES_PER_S, THUMB_GRID, THUMB_SIZE
+from leafview.bench.timing import bench_context, gl_info, median_time
 from leafview.botany.batch_fit import fit_outlines
 from leafview.botany.catalogue import catalogue_names, landmark_leaf, random_instance
 from leafview.botany.landmarks import outline
 from leafview.botany.outline_fit import fit_outline
 from leafview.botany.shapes import INSTANCE_TARGET, shapes_params
-from leafview.core.params import Transform
-from leafview.gpu.context import check_error, create_headless_context
+from leafview.core.params import LeafParams, Transform
+from leafview.gpu.context import check_error
 from leafview.gpu.instanced import InstancedLeaves, OffscreenTarget
 from leafview.gpu.layout import LEAF_BLOCK, pack_leaves
 from leafview.gpu.renderer import LeafRenderer
@@ -55,13 +57,11 @@ SHAPES = ("ovate", "lanceolate", "cordate", "obovate-convex-concave", "reniform"
 
 
 def _instances(n: int) -> list[Any]:
-
     return [random_instance(landmark_leaf(SHAPES[i % len(SHAPES)]), seed=i, amount=0.2) for i in range(n)]
 
 
 def _scatter(leaves: list[Any], count: int, seed: int = 0) -> list[Any]:
     """``count`` copies of ``leaves`` on a jittered grid in the xy plane (all visible)."""
-
     rng = np.random.default_rng(seed)
     side = int(np.ceil(np.sqrt(count)))
     out = []
@@ -73,9 +73,8 @@ def _scatter(leaves: list[Any], count: int, seed: int = 0) -> list[Any]:
     return out
 
 
-def _frame_time(ctx: Any, leaves: list[Any], repeats: int) -> tuple[float, float]:
+def _frame_time(ctx: moderngl.Context, leaves: list[Any], repeats: int) -> tuple[float, float]:
     """(median frame seconds, upload seconds) drawing ``leaves`` in one instanced draw."""
-
     view = np.eye(4)
     proj = np.diag([1.0, 1.0, -0.1, 1.0])
     cam = Camera(view=view, proj=proj, eye=np.array([0.0, 0.0, -1.0, 0.0]), perspective=False)
@@ -95,13 +94,12 @@ def _frame_time(ctx: Any, leaves: list[Any], repeats: int) -> tuple[float, float
 
             frame()
             ctx.finish()
-            return _median_time(frame, repeats, ctx.finish), upload
+            return median_time(frame, repeats, ctx.finish), upload
 
 
-def _landmark_rates(ctx: Any, res: dict[str, Any], quick: bool) -> None:
+def _landmark_rates(ctx: moderngl.Context, res: dict[str, Any], quick: bool) -> None:
     """Issue 6 §7: landmark leaves generated, fitted and rendered per second, batched path and
     per-leaf path side by side (same leaves, same renderer, same thumbnail size)."""
-
     names = catalogue_names()
     count, repeats, n_old = (62, 1, 2) if quick else (248, 3, 8)
     bases = [landmark_leaf(names[i % len(names)]) for i in range(count)]
@@ -147,9 +145,9 @@ def _landmark_rates(ctx: Any, res: dict[str, Any], quick: bool) -> None:
         step = count // n_old
         t0 = time.perf_counter()
         leaves = [random_instance(bases[i], seed=i, amount=0.2) for i in range(0, count, step)][:n_old]
-        rings = [outline(leaf, 128) for leaf in leaves]
+        old_rings = [outline(leaf, 128) for leaf in leaves]
         t1 = time.perf_counter()
-        old = [fit_outline(ring, target=INSTANCE_TARGET).params for ring in rings]
+        old = [fit_outline(ring, target=INSTANCE_TARGET).params for ring in old_rings]
         t2 = time.perf_counter()
         for params in old:
             renderer.render(params, THUMB_SIZE, "top", grid=THUMB_GRID)
@@ -166,19 +164,17 @@ def _landmark_rates(ctx: Any, res: dict[str, Any], quick: bool) -> None:
         renderer.release()
 
 
-def _warm_leaves() -> list[Any]:
-
+def _warm_leaves() -> list[LeafParams]:
     return [shapes_params("ovate"), shapes_params("cordate")]
 
 
-def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
-
-    own = ctx is None
-    if own:
-        ctx = create_headless_context()
-    res: dict[str, Any] = {"gl_renderer": str(ctx.info["GL_RENDERER"]), "quick": quick,
-                           "paper_leaves_per_s": PAPER_LEAVES_PER_S, "triangles_per_leaf": 2 * (GRID[0] - 1) * (GRID[1] - 1)}
-    try:
+def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, Any]:
+    """Run the shapes benchmark on ``ctx`` (default a new headless context); see the module
+    docstring for the keys."""
+    with bench_context(ctx) as ctx:
+        res: dict[str, Any] = {"gl_renderer": gl_info(ctx)["gl_renderer"], "quick": quick,
+                               "paper_leaves_per_s": PAPER_LEAVES_PER_S,
+                               "triangles_per_leaf": 2 * (GRID[0] - 1) * (GRID[1] - 1)}
         n_fast, n_polish = (12, 3) if quick else (60, 30)
         t0 = time.perf_counter()
         leaves = _instances(n_fast)
@@ -222,9 +218,6 @@ def run(quick: bool = False, ctx: Any = None) -> dict[str, Any]:
         res["param_bytes"] = LEAF_BLOCK.parameter_nbytes
         _landmark_rates(ctx, res, quick)
         check_error(ctx, "shapes benchmark")
-    finally:
-        if own:
-            ctx.release()
     return res
 
 

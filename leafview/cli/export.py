@@ -14,16 +14,26 @@ Every input is validated before anything is baked; files are written atomically.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from leafview.cli import _expand, int_in_range, int_pair, load_leaf_files
+from leafview.cli.args import (
+    EXIT_OK,
+    expand_presets,
+    grid,
+    int_in_range,
+    load_leaf_files,
+    output_directory,
+    progress_bar,
+    refuse_directory,
+    unique_names,
+)
 from leafview.core.io import read_document, save_leaves, save_params
-from leafview.errors import UsageError
+from leafview.core.params import LeafParams
+from leafview.errors import GLUnavailable, UsageError
 from leafview.export import (
     DEFAULT_LENGTH_M,
     FORMATS,
@@ -37,7 +47,6 @@ from leafview.export.gltf import BACK_FACES, INSTANCING_MODES
 from leafview.export.mesh import BACKENDS, DEFAULT_RESOLUTION, check_resolution
 from leafview.export.objply import UP_AXES
 from leafview.export.scene import leaf_scene
-from leafview.gpu.context import GLUnavailable
 from leafview.scene.spec import build_scene, load_scene, scene_from_leaves
 
 __all__ = ["add_arguments", "run"]
@@ -46,7 +55,7 @@ _FORMAT_NAMES = tuple(s.lstrip(".") for s in FORMATS)
 
 
 def _resolution(text: str) -> tuple[int, int]:
-    nu, nv = int_pair(text, lo=2, hi=1025, what="NUxNV", example="33x65")
+    nu, nv = grid(text)
     try:
         return check_resolution((nu, nv))
     except UsageError as exc:
@@ -64,6 +73,7 @@ def _length(text: str) -> float:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The options of ``leafview export``."""
     parser.description = ("Bake leaves into meshes with normals and texture coordinates (jitter, ripples "
                           "and bending included; vertices read back from the rendering shader). "
                           "Formats: .glb/.gltf (glTF 2.0), .obj, .ply, .usda/.usdc. See docs/export.md.")
@@ -106,22 +116,16 @@ def _parametric(out: Path) -> str | None:
 
 def _run_parametric(args: argparse.Namespace, paths: list[Path], kind: str, started: float) -> int:
     """Write the compact form: one leaf (.leaf.json) or a leaf set (.leaves.json)."""
-    from tqdm import tqdm
-
-
     out = Path(args.output)
     if args.format:
         raise UsageError(f"-o {out} is a parametric file: --format applies to meshes only")
-    if out.is_dir():
-        raise UsageError(f"-o {out} is a directory; give a file name")
+    refuse_directory("-o", out)
     scenes = [p for p in paths if _is_scene(p)]
     if scenes:
         if len(paths) != 1 or kind != ".leaves.json":
             raise UsageError(f"{scenes[0]} is a scene file: write its leaves on their own with -o NAME.leaves.json")
-
         scene = build_scene(load_scene(scenes[0]))
-        with tqdm(total=len(scene), unit="leaf", desc="collecting", file=sys.stderr,
-                  disable=True if args.quiet else None) as bar:
+        with progress_bar(total=len(scene), unit="leaf", desc="collecting", quiet=args.quiet) as bar:
             leaves = scene.placed_leaves(bar.update)   # unnamed: a leaf set names them <stem>-<i>
         what = f"{len(leaves):,} leaves of {scenes[0].name}"
     else:
@@ -138,13 +142,12 @@ def _run_parametric(args: argparse.Namespace, paths: list[Path], kind: str, star
         exact = "exact" if args.digits is None else f"{args.digits} significant digits"
         print(f"wrote {out} ({what}, {size:,} bytes, {size / len(leaves):,.0f} B/leaf, {exact}) "
               f"in {time.perf_counter() - started:.1f} s")
-    return 0
+    return EXIT_OK
 
 
 def _is_scene(path: Path) -> bool:
     if path.suffix.lower() not in (".toml", ".json") or not path.is_file():
         return False
-
     doc = read_document(path)
     return isinstance(doc, dict) and "species" in doc
 
@@ -167,24 +170,21 @@ def _target(args: argparse.Namespace, count: int) -> tuple[str, Path, str]:
         fmt = format_of(out)
         if args.format and args.format != out.suffix.lower().lstrip("."):
             raise UsageError(f"-o {out} is a {out.suffix} file but --format {args.format} was given")
-        if out.is_dir():
-            raise UsageError(f"-o {out} is a directory; give a file name")
+        refuse_directory("-o", out)
         return "file", out, fmt
     if out.suffix and out.suffix.lower() in FORMATS:
         raise UsageError(f"{count} presets need -o DIR (one file each), not the file {out}")
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"-o {out} exists and is not a directory")
     fmt = args.format or "glb"
-    return "dir", out, FORMATS["." + fmt]
+    return "dir", output_directory(out), FORMATS["." + fmt]
 
 
-def _size(path: Path) -> str:
+def _file_size(path: Path) -> str:
     n = path.stat().st_size
     return f"{n / 1e6:.1f} MB" if n >= 1e6 else f"{n / 1e3:.0f} kB"
 
 
 def run(args: argparse.Namespace) -> int:
-
+    """Export the inputs of ``args``; returns the exit code."""
     try:
         return _run(args)
     except GLUnavailable as exc:
@@ -192,10 +192,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
     started = time.perf_counter()
-    paths = _expand(args.inputs)
+    paths = expand_presets(args.inputs)
     kind = _parametric(Path(args.output))
     if kind:
         return _run_parametric(args, paths, kind, started)
@@ -211,9 +209,8 @@ def _run(args: argparse.Namespace) -> int:
         return _run_scene(args, paths[0], started, leaves=leaves)   # a leaf set into one file
     mode, out, fmt = _target(args, len(leaves))
     names = [leaf.name for leaf in leaves]
-    if mode == "dir" and len(set(names)) != len(names):
-        dup = sorted({n for n in names if names.count(n) > 1})
-        raise UsageError(f"several presets are named {', '.join(dup)}: their files would overwrite each other")
+    if mode == "dir":
+        unique_names(names, "files")
     opts = _options(args, fmt)
     common = {"resolution": args.resolution, "backend": args.backend, "length_m": args.length_m}
     if mode == "file":
@@ -221,12 +218,11 @@ def _run(args: argparse.Namespace) -> int:
         write(leaf_scene(leaves[0], mesh, length_m=args.length_m), out, **opts)
         if not args.quiet:
             print(f"wrote {out} ({names[0]}, {mesh.n_vertices} vertices, {mesh.n_triangles} triangles, "
-                  f"{_size(out)}) in {time.perf_counter() - started:.1f} s")
-        return 0
+                  f"{_file_size(out)}) in {time.perf_counter() - started:.1f} s")
+        return EXIT_OK
     suffix = next(s for s, f in FORMATS.items() if f == fmt)
     written: list[Path] = []
-    bar = tqdm(total=len(leaves), unit="leaf", desc="exporting", file=sys.stderr,
-               disable=True if args.quiet else None)
+    bar = progress_bar(total=len(leaves), unit="leaf", desc="exporting", quiet=args.quiet)
     try:
         for leaf, name in zip(leaves, names):
             written.append(export_leaf(leaf, out / f"{name}{suffix}", **common, **opts))
@@ -239,27 +235,25 @@ def _run(args: argparse.Namespace) -> int:
         bar.close()
     if not args.quiet:
         print(f"wrote {len(written)} {fmt} files to {out}/ in {time.perf_counter() - started:.1f} s")
-    return 0
+    return EXIT_OK
 
 
-def _run_scene(args: argparse.Namespace, path: Path, started: float, leaves: list[Any] | None = None) -> int:
+def _run_scene(args: argparse.Namespace, path: Path, started: float,
+               leaves: list[LeafParams] | None = None) -> int:
     """One file for a scene recipe, or for the placed leaves of a leaf set (``leaves``)."""
-    from tqdm import tqdm
-
-
     out = Path(args.output)
     fmt = format_of(out)
     if args.format and args.format != out.suffix.lower().lstrip("."):
         raise UsageError(f"-o {out} is a {out.suffix} file but --format {args.format} was given")
     scene = build_scene(load_scene(path)) if leaves is None else scene_from_leaves(leaves, name=path.name)
     shapes = len(np.unique(scene.shape_ids)) if len(scene) else 0
-    bar = tqdm(total=shapes, unit="shape", desc="baking", file=sys.stderr, disable=True if args.quiet else None)
+    bar = progress_bar(total=shapes, unit="shape", desc="baking", quiet=args.quiet)
     try:
         export_scene(scene, out, resolution=args.resolution, backend=args.backend, length_m=args.length_m,
                      progress=bar.update, name=out.stem, **_options(args, fmt))
     finally:
         bar.close()
     if not args.quiet:
-        print(f"wrote {out} ({len(scene)} leaves, {shapes} distinct shapes, {_size(out)}) "
+        print(f"wrote {out} ({len(scene)} leaves, {shapes} distinct shapes, {_file_size(out)}) "
               f"in {time.perf_counter() - started:.1f} s")
-    return 0
+    return EXIT_OK

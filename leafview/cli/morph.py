@@ -1,4 +1,4 @@
-"""``leafview morph``: a frame sequence morphing one leaf shape into another (Garg & Leow sec. 6).
+"""``leafview morph``: a frame sequence morphing one leaf shape into another (Garg & Leow 2011, sec. 6).
 
 Examples::
 
@@ -22,25 +22,20 @@ from pathlib import Path
 
 from leafview.atomic import atomic_output
 from leafview.botany.shapes import INSTANCE_TARGET
-from leafview.cli import _size as size
+from leafview.cli.args import EXIT_OK, VIEWS, output_directory, pixels, progress_bar
 from leafview.core.io import dumps_toml
 from leafview.errors import UsageError
 from leafview.export.images import contact_sheet, write_image
-from leafview.gpu.morph import load_morph_leaf, morph_sequence, parse_ref, render_sequence
+from leafview.gpu.morph import MorphSequence, load_morph_leaf, morph_sequence, parse_ref, render_sequence
 
-__all__ = ["add_arguments", "run"]
+__all__ = ["add_arguments", "run", "MAX_FRAMES"]
 
-_VIEWS = ("top", "front", "three-quarter", "side")
 MAX_FRAMES = 1000
 
 
-def _size(text: str) -> int:
-
-    return size(text)
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.description = ("Morph leaf shape A into B along the NURBS path of Garg & Leow (eq. 11), pulled "
+    """The options of ``leafview morph``."""
+    p.description = ("Morph leaf shape A into B along the NURBS path (Garg & Leow 2011, eq. 11), pulled "
                      "towards weighted reference shapes; each frame is fitted to the shader model and "
                      "rendered. A, B and references are landmark leaf files (`landmarks = 1`, e.g. "
                      "assets/landmarks/*.toml) or catalogue names (`leafview shapes` lists them).")
@@ -50,8 +45,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="reference shape with weight W >= 0 (default 1), in path order; repeatable")
     p.add_argument("--frames", type=int, default=24, help="number of frames, ends included (default 24)")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output directory")
-    p.add_argument("--size", type=_size, default=192, help="pixels per frame (default 192)")
-    p.add_argument("--view", choices=_VIEWS, default="top", help="camera (default top)")
+    p.add_argument("--size", type=pixels, default=192, help="pixels per frame (default 192)")
+    p.add_argument("--view", choices=VIEWS, default="top", help="camera (default top)")
     p.add_argument("--method", choices=("nurbs", "keyframe"), default="nurbs",
                    help="nurbs: eq. 11, frames evenly spaced along the path (default); keyframe: linear "
                         "key-framing through the references (for comparison)")
@@ -64,14 +59,11 @@ def _output_dir(text: str) -> Path:
     out = Path(text)
     if out.suffix.lower() in (".png", ".tif", ".tiff", ".exr", ".jpg"):
         raise UsageError(f"-o {out}: morph writes a directory of frames; give a directory name")
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"-o {out} exists and is not a directory")
-    return out
+    return output_directory(out)
 
 
-def _warn_loose_fits(seq) -> None:
+def _warn_loose_fits(seq: MorphSequence) -> None:
     """Say which frames the shader model follows less closely than 1 % of the leaf length."""
-
     loose = [i for i, e in enumerate(seq.errors) if e > INSTANCE_TARGET]
     if not loose:
         return
@@ -82,9 +74,7 @@ def _warn_loose_fits(seq) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
-
+    """Fit, render and write the morph of ``args``; returns the exit code."""
     if not 2 <= args.frames <= MAX_FRAMES:
         raise UsageError(f"--frames must be between 2 and {MAX_FRAMES}, got {args.frames}")
     out = _output_dir(args.output)
@@ -96,12 +86,11 @@ def run(args: argparse.Namespace) -> int:
         refs.append((load_morph_leaf(ref.spec, f"--ref {text}"), ref.weight))
 
     t0 = time.perf_counter()
-    quiet = True if args.quiet else None
-    with tqdm(total=args.frames, unit="frame", desc="fitting frames", disable=quiet, file=sys.stderr) as bar:
+    with progress_bar(total=args.frames, unit="frame", desc="fitting frames", quiet=args.quiet) as bar:
         seq = morph_sequence(source, target, refs, args.frames, method=args.method, polish=not args.fast,
                              progress=bar.update)
     t_fit = time.perf_counter() - t0
-    with tqdm(total=args.frames, unit="frame", desc="rendering", disable=quiet, file=sys.stderr) as bar:
+    with progress_bar(total=args.frames, unit="frame", desc="rendering", quiet=args.quiet) as bar:
         images = render_sequence(seq.parts, args.size, args.view, progress=bar.update)
     width = len(str(args.frames - 1))
     labels = [f"{i:0{width}d}  t={t:.2f}" for i, t in enumerate(seq.t)]
@@ -143,4 +132,4 @@ def run(args: argparse.Namespace) -> int:
     if seq.reference_distances:
         d = ", ".join(f"{x:.3f}" for x in seq.reference_distances)
         print(f"distance from the path to each reference (leaf space): {d}")
-    return 0
+    return EXIT_OK

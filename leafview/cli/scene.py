@@ -11,13 +11,12 @@ Examples::
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from leafview.app.scene_view import view_scene
-from leafview.cli import int_pair
+from leafview.cli.args import EXIT_OK, builtin_names, image_size, progress_bar, refuse_directory
 from leafview.core.compact import is_compact
 from leafview.core.io import leaves_from_document, read_document, save_leaves
 from leafview.core.params import LeafParams
@@ -27,7 +26,16 @@ from leafview.export.images import format_of, write_image
 from leafview.gpu import default_renderer
 from leafview.gpu.scene import LOD_GRIDS, SCENE_VIEWS, CullSettings, SceneRenderer, scene_camera
 from leafview.resources import builtin_presets, resolve_preset
-from leafview.scene.spec import LAYOUTS, MAX_LEAVES, SceneSpec, build_scene, load_scene, save_scene, scene_from_leaves
+from leafview.scene.spec import (
+    LAYOUTS,
+    MAX_LEAVES,
+    Scene,
+    SceneSpec,
+    build_scene,
+    load_scene,
+    save_scene,
+    scene_from_leaves,
+)
 
 __all__ = ["add_arguments", "run", "spec_from_args"]
 
@@ -52,13 +60,8 @@ def _fraction(text: str) -> float:
     return x
 
 
-def _image_size(text: str) -> tuple[int, int]:
-
-    return int_pair(text, lo=16, hi=8192, what="WxH", example="1280x720")
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
-
+    """The options of ``leafview scene``."""
     p.description = ("Build a scene of many leaves (one plant, a field or a hedge; species from presets, "
                      "each leaf varied), then render it offscreen with GPU culling and level of detail, "
                      "save it as a scene file, export it, or open it in a window.")
@@ -73,7 +76,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variation", type=_fraction, help="± fraction each leaf's shape varies (default 0.2)")
     p.add_argument("--no-stems", action="store_true", help="leaves only, no branches")
     p.add_argument("-o", "--output", metavar="IMAGE", help="render to this image (.png, .tif, .exr)")
-    p.add_argument("--size", type=_image_size, default=(1024, 768), metavar="WxH", help="image size (default 1024x768)")
+    p.add_argument("--size", type=image_size, default=(1024, 768), metavar="WxH", help="image size (default 1024x768)")
     p.add_argument("--camera", choices=SCENE_VIEWS, default="three-quarter", help="camera (default three-quarter)")
     p.add_argument("--no-cull", action="store_true", help="draw every leaf (no frustum or size culling)")
     p.add_argument("--no-lod", action="store_true", help="every leaf at the finest grid")
@@ -88,7 +91,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def spec_from_args(args: argparse.Namespace) -> SceneSpec:
     """The scene recipe: the file's (if any) with command-line overrides; raises ParamError."""
-
     if args.scene:
         spec = load_scene(args.scene)
     else:
@@ -100,7 +102,7 @@ def spec_from_args(args: argparse.Namespace) -> SceneSpec:
             path = resolve_preset(name)
             if not name or not path.exists():
                 raise UsageError(f"--species: {name!r} is not a preset file or built-in name "
-                                 f"(built-in: {', '.join(builtin_presets())})")
+                                 f"(built-in: {builtin_names()})")
             species.append(LeafParams.load(path))
         changes.update(species=tuple(species), weights=())
     for key in ("leaves", "layout", "seed", "plants", "variation"):
@@ -113,7 +115,6 @@ def spec_from_args(args: argparse.Namespace) -> SceneSpec:
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
-
     if not (args.output or args.save or args.export or args.view):
         raise UsageError("nothing to do: give -o IMAGE, --save FILE, --export FILE or --view")
     if (args.frames is not None or args.screenshot) and not args.view:
@@ -125,15 +126,14 @@ def _check_outputs(args: argparse.Namespace) -> None:
     if args.save and Path(args.save).suffix.lower() not in (".toml", ".json"):
         raise UsageError(f"--save {args.save}: use a .toml or .json file name")
     for flag, value in (("-o", args.output), ("--save", args.save), ("--export", args.export)):
-        if value and Path(value).is_dir():
-            raise UsageError(f"{flag} {value} is a directory; give a file name")
+        if value:
+            refuse_directory(flag, value)
 
 
-def _leaf_set(args: argparse.Namespace) -> list[Any] | None:
+def _leaf_set(args: argparse.Namespace) -> list[LeafParams] | None:
     """The leaves of ``SCENE`` when it is a leaf set (``{"leafview": 1, "leaves": [...]}``), else None."""
     if not args.scene or Path(args.scene).suffix.lower() != ".json":
         return None
-
     doc = read_document(args.scene)
     if not is_compact(doc):
         return None
@@ -145,9 +145,8 @@ def _leaf_set(args: argparse.Namespace) -> list[Any] | None:
     return leaves_from_document(doc, args.scene)
 
 
-def _save(scene: Any, spec: SceneSpec, path: str, explicit: bool) -> None:
+def _save(scene: Scene, spec: SceneSpec, path: str, explicit: bool) -> None:
     """--save: a recipe as .toml/.json, or every placed leaf as a leaf set (.leaves.json)."""
-
     if path.lower().endswith(".leaves.json"):
         save_leaves(scene.placed_leaves(), path)
     elif explicit:
@@ -157,15 +156,12 @@ def _save(scene: Any, spec: SceneSpec, path: str, explicit: bool) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tqdm import tqdm
-
-
+    """Build, save, export, render and/or view the scene of ``args``; returns the exit code."""
     _check_outputs(args)
     say = (lambda text: None) if args.quiet else print
     t0 = time.perf_counter()
     leaves = _leaf_set(args)
     if leaves is not None:            # a leaf set: explicit placed leaves, drawn as they are
-
         scene = scene_from_leaves(leaves, name=Path(args.scene).name)
         spec = scene.spec
     else:
@@ -176,18 +172,16 @@ def run(args: argparse.Namespace) -> int:
         _save(scene, spec, args.save, leaves is not None)
         say(f"wrote {args.save}: {len(scene):,} leaves, {len(spec.species)} species, seed {spec.seed}")
     if args.export:
-
         # the grid the scene is drawn with up close, not the single-leaf default (33×65 would
         # make 10⁴ varied leaves a 1.4 GB file)
-        with tqdm(total=len(scene) if scene.varied else len(scene.species), unit="shape", desc="baking",
-                  file=sys.stderr, disable=True if args.quiet else None, leave=False) as bar:
+        with progress_bar(total=len(scene) if scene.varied else len(scene.species), unit="shape", desc="baking",
+                          quiet=args.quiet, leave=False) as bar:
             export_scene(scene, args.export, resolution=LOD_GRIDS[0], progress=bar.update)
         say(f"wrote {args.export}: {len(scene):,} leaves baked at {LOD_GRIDS[0][0]}×{LOD_GRIDS[0][1]}")
     if args.output:
-
         ctx = default_renderer().ctx
-        bar = tqdm(total=len(scene), unit="leaf", unit_scale=True, desc="uploading", file=sys.stderr,
-                   disable=True if args.quiet else None, leave=False)
+        bar = progress_bar(total=len(scene), unit="leaf", unit_scale=True, desc="uploading", quiet=args.quiet,
+                           leave=False)
         t1 = time.perf_counter()
         try:
             renderer = SceneRenderer(ctx, scene, progress=bar.update)
@@ -210,6 +204,5 @@ def run(args: argparse.Namespace) -> int:
             f"build {t_build:.1f} s, upload {t_upload:.1f} s, frame {t_frame:.2f} s "
             f"[{ctx.info['GL_RENDERER']}]")
     if args.view:
-
         return view_scene(scene, size=args.size, frames=args.frames, screenshot=args.screenshot)
-    return 0
+    return EXIT_OK

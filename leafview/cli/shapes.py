@@ -13,14 +13,13 @@ Examples::
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from pathlib import Path
 from typing import Any
 
 from leafview.botany.lobes import load_lobed_leaf
 from leafview.botany.shapes import fit_info, shape_names, shapes_params
-from leafview.cli import _size as size
+from leafview.cli.args import EXIT_OK, VIEWS, output_directory, pixels, progress_bar, refuse_directory
 from leafview.core.defaults import DETAIL_GRID
 from leafview.core.params import LeafParams
 from leafview.errors import UsageError
@@ -30,23 +29,17 @@ from leafview.gpu.sheets import render_lobed
 
 __all__ = ["add_arguments", "run"]
 
-_VIEWS = ("top", "front", "three-quarter", "side")
-
-
-def _size(text: str) -> int:
-
-    return size(text)
-
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.description = ("The unilobed leaf shapes of Garg & Leow (Table 1, Fig. 5) fitted to the shader "
+    """The options of ``leafview shapes``."""
+    p.description = ("The unilobed leaf shapes (Garg & Leow 2011, Table 1, Fig. 5) fitted to the shader "
                      "model, and multilobed leaves (sec. 5). Without -o: list the shapes and their fit "
                      "errors. With -o: render them (all, or --names) through the shader path.")
     p.add_argument("-o", "--output", metavar="FILE|DIR", help="image file (one shape, or --sheet) or directory")
     p.add_argument("--names", nargs="+", metavar="NAME", help="catalogue names (default: all); commas work too")
     p.add_argument("--sheet", action="store_true", help="one labelled contact sheet")
-    p.add_argument("--size", type=_size, default=128, help="pixels per image (default 128)")
-    p.add_argument("--view", choices=_VIEWS, default="top", help="camera (default top)")
+    p.add_argument("--size", type=pixels, default=128, help="pixels per image (default 128)")
+    p.add_argument("--view", choices=VIEWS, default="top", help="camera (default top)")
     p.add_argument("--seed", type=int, help="render a random instance of each shape (±20 %%, Fig. 8), fitted now")
     p.add_argument("--lobed", metavar="NAME|FILE", help="render a multilobed leaf: a file or a built-in "
                    "(maple, oak, ...) from assets/compound")
@@ -54,7 +47,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _names(args: argparse.Namespace) -> list[str]:
-
     if not args.names:
         return shape_names()
     names = [n for item in args.names for n in item.split(",") if n]
@@ -64,7 +56,6 @@ def _names(args: argparse.Namespace) -> list[str]:
 
 
 def _list(names: list[str]) -> int:
-
     print(f"{'name':28s} {'waist':9s} {'base':9s} {'apex':9s} {'rows':>4s} {'model':9s} {'fit error':>9s}")
     for name in names:
         f = fit_info(name)
@@ -72,11 +63,10 @@ def _list(names: list[str]) -> int:
         print(f"{name:28s} {f.waist:9s} {f.base:9s} {f.apex:9s} {f.rows:4d} {model:9s} {100 * f.error:8.2f}%")
     worst = max(fit_info(n).error for n in names)
     print(f"{len(names)} shapes; fit error = Hausdorff(margin, outline) / leaf length; largest {100 * worst:.2f} %")
-    return 0
+    return EXIT_OK
 
 
 def _output(args: argparse.Namespace, count: int) -> tuple[str, Path]:
-
     out = Path(args.output)
     fmt = format_of(out)
     if args.sheet or (count == 1 and out.suffix):
@@ -84,38 +74,27 @@ def _output(args: argparse.Namespace, count: int) -> tuple[str, Path]:
             raise UsageError(f"-o {out}: give an image file name (.png, .tif{'' if args.sheet else ', .exr'})")
         if args.sheet and fmt == "exr":
             raise UsageError("--sheet writes an 8-bit labelled image: use .png or .tif")
-        if out.is_dir():
-            raise UsageError(f"-o {out} is a directory; give a file name")
+        refuse_directory("-o", out)
         return ("sheet" if args.sheet else "file"), out
     if fmt is not None:
         raise UsageError(f"{count} shapes need -o DIR (one image each) or --sheet, not the file {out}")
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"-o {out} exists and is not a directory")
-    return "dir", out
+    return "dir", output_directory(out)
 
 
 def _leaves(names: list[str], seed: int | None, quiet: bool) -> list[LeafParams]:
-    from tqdm import tqdm
-
-
     if seed is None:
         return [shapes_params(n) for n in names]
-    bar = tqdm(names, unit="fit", desc="fitting instances", disable=True if quiet else None, file=sys.stderr)
+    bar = progress_bar(names, unit="fit", desc="fitting instances", quiet=quiet)
     return [shapes_params(n, seed) for n in bar]
 
 
 def _render_shapes(args: argparse.Namespace, names: list[str]) -> int:
-    from tqdm import tqdm
-
-
     t0 = time.perf_counter()
     mode, out = _output(args, len(names))
     leaves = _leaves(names, args.seed, args.quiet)
     renderer = default_renderer()
     images: list[Any] = []
-    bar = tqdm(total=len(leaves), unit="leaf", desc="rendering", disable=True if args.quiet else None,
-               file=sys.stderr)
-    with bar:
+    with progress_bar(total=len(leaves), unit="leaf", desc="rendering", quiet=args.quiet) as bar:
         for start in range(0, len(leaves), 16):
             batch = leaves[start:start + 16]
             images += renderer.render_many(batch, (args.size, args.size), args.view, grid=DETAIL_GRID)
@@ -134,19 +113,17 @@ def _render_shapes(args: argparse.Namespace, names: list[str]) -> int:
             write_image(out / f"{label.replace('#', '-')}.png", img, params=leaf)
         print(f"wrote {len(images)} png images ({args.size}×{args.size}, {args.view} view) to {out}/ "
               f"in {time.perf_counter() - t0:.1f} s")
-    return 0
+    return EXIT_OK
 
 
 def _render_lobed(args: argparse.Namespace) -> int:
-
     if args.names or args.sheet or args.seed is not None:
         raise UsageError("--lobed renders one multilobed leaf: drop --names, --sheet and --seed")
     lobed = load_lobed_leaf(args.lobed)
     if args.output is None:
         print(lobed.describe())
-        return 0
+        return EXIT_OK
     out = Path(args.output)
-
     if format_of(out) is None:
         raise UsageError(f"-o {out}: give an image file name (.png, .exr or .tif)")
     t0 = time.perf_counter()
@@ -154,10 +131,11 @@ def _render_lobed(args: argparse.Namespace) -> int:
     write_image(out, img, description=f"leafview multilobed leaf: {lobed.name}")
     print(f"wrote {out} ({args.size}×{args.size}, {args.view} view, {lobed.name}: {len(lobed.lobes())} lobes) "
           f"in {time.perf_counter() - t0:.1f} s")
-    return 0
+    return EXIT_OK
 
 
 def run(args: argparse.Namespace) -> int:
+    """List or render the catalogue shapes, or render a multilobed leaf; returns the exit code."""
     if args.lobed:
         return _render_lobed(args)
     names = _names(args)

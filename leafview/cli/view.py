@@ -1,4 +1,4 @@
-"""``leafview view [PRESET]``: argument checks and the run (called from :mod:`leafview.cli`).
+"""``leafview view [PRESET]``: the interactive viewer window.
 
 Bad input (an unknown preset, a malformed file, a bad ``--size`` or ``--screenshot`` name) is
 reported before any window opens, with exit code 2; no display or no OpenGL 4.5 exits 1 with
@@ -8,31 +8,25 @@ what to install.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from leafview.app.viewer import open_state
 from leafview.app.window import ViewerWindow
-from leafview.cli import UsageError, int_in_range, int_pair
+from leafview.cli.args import int_in_range, preset_file, refuse_directory, window_size
 from leafview.core.params import LeafParams
+from leafview.errors import UsageError
 from leafview.export.images import format_of
-from leafview.resources import builtin_presets, resolve_preset
 
-__all__ = ["add_arguments", "view_main", "window_size"]
-
-
-def window_size(text: str) -> tuple[int, int]:
-    """``WxH`` → (w, h), each 64..8192."""
-
-    return int_pair(text, lo=64, hi=8192, what="WIDTHxHEIGHT", example="1280x800")
+__all__ = ["add_arguments", "run"]
 
 
 def _frames(text: str) -> int:
-
     return int_in_range(text, lo=1, hi=None, what="frames", name="--frames")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``leafview view``."""
+    parser.description = ("Edit a leaf live: every parameter on a slider, control points dragged in the "
+                          "viewport, undo/redo, presets. H in the window shows the keys.")
     parser.add_argument("preset", nargs="?", default="ovate", metavar="PRESET",
                         help="a .toml/.json preset or a built-in name (default: ovate)")
     parser.add_argument("--size", type=window_size, default=(1280, 800), metavar="WxH",
@@ -47,24 +41,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="multisampling of the scene (default 4; 0 on software renderers such as llvmpipe)")
 
 
-def view_main(args: argparse.Namespace) -> int:
-    """Run the viewer for parsed ``args``; returns the exit code."""
-
-    path = resolve_preset(args.preset)
-    if not path.exists() and not path.suffix:
-        raise UsageError(f"{args.preset}: no such file or built-in preset "
-                         f"(built-in: {', '.join(builtin_presets())})")
-    if path.is_dir():
-        raise UsageError(f"{path} is a directory: give one preset file or a built-in name")
+def run(args: argparse.Namespace) -> int:
+    """Open the viewer for parsed ``args``; returns the exit code."""
+    path = preset_file(args.preset)
     if args.screenshot is not None:
-        fmt = format_of(args.screenshot)
-        if fmt not in ("png", "tif"):
+        if format_of(args.screenshot) not in ("png", "tif"):
             raise UsageError(f"--screenshot {args.screenshot}: use a .png or .tif file name")
-        if Path(args.screenshot).is_dir():
-            raise UsageError(f"--screenshot {args.screenshot} is a directory; give a file name")
+        refuse_directory("--screenshot", args.screenshot)
     params = LeafParams.load(path)  # ParamError → exit 2, naming the file and field
     state = open_state(params, path)
-
-
     with ViewerWindow(state, args.size, dev=args.dev, samples=args.samples) as window:
         return window.run(frames=args.frames, screenshot=args.screenshot)

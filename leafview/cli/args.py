@@ -1,0 +1,150 @@
+"""What the ``leafview`` commands share: exit codes, argument types, preset expansion, output
+checks and reporting.
+
+Argument types raise :class:`argparse.ArgumentTypeError` (argparse prints the message and exits
+2); the other helpers raise :class:`~leafview.errors.UsageError`, which :func:`leafview.cli.main`
+reports with exit code 2 before anything is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+from tqdm import tqdm
+
+from leafview.core.io import load_leaves
+from leafview.core.params import LeafParams
+from leafview.errors import UsageError
+from leafview.resources import builtin_presets, resolve_preset
+from leafview.scene.camera import VIEWS
+
+__all__ = ["EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_INTERRUPTED", "VIEWS", "int_in_range", "int_pair",
+           "pixels", "image_size", "window_size", "grid", "builtin_names", "expand_presets", "preset_file",
+           "load_leaf_files", "refuse_directory", "output_directory", "unique_names", "report", "progress_bar"]
+
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
+EXIT_INTERRUPTED = 130   # Ctrl-C, as a shell reports SIGINT
+
+
+# -- argument types -----------------------------------------------------------------------------
+def int_in_range(text: str, *, lo: int, hi: int | None, what: str, name: str) -> int:
+    """Parse a whole number in lo..hi (no upper bound when ``hi`` is None) for argparse:
+    ``what`` names the unit in the type error, ``name`` the option in the range error."""
+    try:
+        n = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number of {what}, got {text!r}") from None
+    if n < lo or (hi is not None and n > hi):
+        bound = f"between {lo} and {hi}" if hi is not None else f"at least {lo}"
+        raise argparse.ArgumentTypeError(f"{name} must be {bound} {what}, got {n}")
+    return n
+
+
+def int_pair(text: str, *, lo: int, hi: int, what: str, example: str) -> tuple[int, int]:
+    """Parse ``AxB`` (two whole numbers, each in lo..hi) for argparse, with a clear message."""
+    try:
+        a, b = (int(x) for x in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {what} such as {example}, got {text!r}") from None
+    if not (lo <= a <= hi and lo <= b <= hi):
+        raise argparse.ArgumentTypeError(f"{a}x{b} outside {lo}..{hi} per side")
+    return a, b
+
+
+def pixels(text: str) -> int:
+    """``--size N`` of square images: 8..8192 pixels."""
+    return int_in_range(text, lo=8, hi=8192, what="pixels", name="size")
+
+
+def image_size(text: str) -> tuple[int, int]:
+    """``--size WxH`` of an offscreen image: each side 16..8192."""
+    return int_pair(text, lo=16, hi=8192, what="WxH", example="1280x720")
+
+
+def window_size(text: str) -> tuple[int, int]:
+    """``--size WxH`` of a window: each side 64..8192."""
+    return int_pair(text, lo=64, hi=8192, what="WIDTHxHEIGHT", example="1280x800")
+
+
+def grid(text: str) -> tuple[int, int]:
+    """``NUxNV`` samples across and along the blade: each 2..1025."""
+    return int_pair(text, lo=2, hi=1025, what="NUxNV", example="33x65")
+
+
+# -- presets ------------------------------------------------------------------------------------
+def builtin_names() -> str:
+    """The built-in preset names, comma-separated (for error messages)."""
+    return ", ".join(builtin_presets())
+
+
+def expand_presets(specs: Sequence[str]) -> list[Path]:
+    """Preset files for ``specs`` (files, directories of presets, built-in names), in order;
+    raises UsageError naming the first that is missing or an empty directory."""
+    paths: list[Path] = []
+    for spec in specs:
+        path = resolve_preset(spec)
+        if not path.exists() and not path.suffix:
+            raise UsageError(f"{spec}: no such file, directory or built-in preset (built-in: {builtin_names()})")
+        if path.is_dir():
+            found = sorted([*path.glob("*.toml"), *path.glob("*.json")])
+            if not found:
+                raise UsageError(f"{path}: directory holds no .toml or .json presets")
+            paths.extend(found)
+        else:
+            paths.append(path)
+    return paths
+
+
+def preset_file(spec: str) -> Path:
+    """One preset file or built-in name (not a directory); raises UsageError."""
+    path = resolve_preset(spec)
+    if not path.exists() and not path.suffix:
+        raise UsageError(f"{spec}: no such file or built-in preset (built-in: {builtin_names()})")
+    if path.is_dir():
+        raise UsageError(f"{path} is a directory: give one preset file or a built-in name")
+    return path
+
+
+def load_leaf_files(paths: Sequence[Path]) -> list[LeafParams]:
+    """Every leaf of the given files, in order: a leaf set (``*.leaves.json``) gives all of its
+    leaves, any other preset file one. Each leaf is named (its file's stem when unnamed)."""
+    return [leaf for path in paths for leaf in load_leaves(path)]
+
+
+# -- outputs ------------------------------------------------------------------------------------
+def refuse_directory(flag: str, path: str | Path) -> None:
+    """UsageError when the output file ``path`` given with ``flag`` is an existing directory."""
+    if Path(path).is_dir():
+        raise UsageError(f"{flag} {path} is a directory; give a file name")
+
+
+def output_directory(path: Path) -> Path:
+    """``-o DIR``: UsageError when ``path`` exists and is not a directory."""
+    if path.exists() and not path.is_dir():
+        raise UsageError(f"-o {path} exists and is not a directory")
+    return path
+
+
+def unique_names(names: Sequence[str], what: str) -> None:
+    """UsageError when two leaves written into one directory share a name (``what``: "images",
+    "files") and so would overwrite each other."""
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise UsageError(f"several presets are named {', '.join(dup)}: their {what} would overwrite each other")
+
+
+# -- reporting ----------------------------------------------------------------------------------
+def report(args: argparse.Namespace, text: str) -> None:
+    """Print ``text`` unless ``-q``/``--quiet`` was given."""
+    if not args.quiet:
+        print(text)
+
+
+def progress_bar(iterable: Iterable[Any] | None = None, *, quiet: bool, **options: Any) -> Any:
+    """A tqdm progress bar on stderr: hidden with ``quiet``, and (tqdm's rule) when stderr is not
+    a terminal. ``options`` go to tqdm (``total``, ``unit``, ``desc``, ``leave``, ...)."""
+    return tqdm(iterable, disable=True if quiet else None, file=sys.stderr, **options)
