@@ -1,4 +1,4 @@
-"""``leafview.beam``: the cantilever beam of Geng, Hu & Zhang 2014 (eq. 4); the implementation is
+"""``leafview.beam``: the cantilever beam (Geng, Hu & Zhang 2014, eq. 4); the implementation is
 :mod:`leafview.deform.beam`."""
 
 from leafview.deform.beam import BEND_SAMPLES, BendProfile, bend_profile, residual, solve_bending

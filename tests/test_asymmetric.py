@@ -1,4 +1,4 @@
-"""Asymmetric landmark leaves (Garg & Leow Fig. 6) through the shader: one one-sided leaf per side
+"""Asymmetric landmark leaves (Garg & Leow 2011, Fig. 6) through the shader: one one-sided leaf per side
 (``shape.half``), each fitted to its own margin, joined along the midrib."""
 
 from __future__ import annotations

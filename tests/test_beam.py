@@ -1,4 +1,4 @@
-"""The cantilever beam of Geng, Hu & Zhang 2014 sec. 4 (eq. 4) and the midrib bend built on it."""
+"""The cantilever beam (Geng, Hu & Zhang 2014, sec. 4, eq. 4) and the midrib bend built on it."""
 
 import numpy as np
 import pytest

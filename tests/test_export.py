@@ -318,13 +318,13 @@ def test_gltf_json_is_plain_json(gl, presets, tmp_path):
 
 
 def test_cli_without_gl_suggests_the_numpy_backend(tmp_path, monkeypatch, capsys):
-    import leafview.gpu as gpu
-    from leafview.gpu.context import GLUnavailable
+    import leafview.export.mesh as mesh
+    from leafview.errors import GLUnavailable
 
     def no_gl():
         raise GLUnavailable("no EGL here")
 
-    monkeypatch.setattr(gpu, "default_renderer", no_gl)
+    monkeypatch.setattr(mesh, "default_renderer", no_gl)   # where the baker looks it up
     out = tmp_path / "leaf.glb"
     assert main(["export", "ovate", "-o", str(out)]) == 1
     assert "--backend numpy" in capsys.readouterr().err and not out.exists()

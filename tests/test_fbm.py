@@ -1,4 +1,4 @@
-"""fBm by spectral synthesis (Geng, Hu & Zhang 2014 sec. 3): spectrum, normalisation, eq. 3, CPU/GPU parity."""
+"""fBm by spectral synthesis (Geng, Hu & Zhang 2014, sec. 3): spectrum, normalisation, eq. 3, CPU/GPU parity."""
 
 import numpy as np
 import pytest

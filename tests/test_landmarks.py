@@ -1,4 +1,4 @@
-"""Garg & Leow eqs 1-6: the quadratic B-spline through landmarks with tangents, its condition number,
+"""Garg & Leow 2011, eqs 1-6: the quadratic B-spline through landmarks with tangents, its condition number,
 the closed form at singular parameters, and the leaf-space outline."""
 
 from __future__ import annotations

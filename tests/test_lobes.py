@@ -1,4 +1,4 @@
-"""Multilobed leaves (Garg & Leow sec. 5): eqs 7-9, valleys, clean joins in the rendered image."""
+"""Multilobed leaves (Garg & Leow 2011, sec. 5): eqs 7-9, valleys, clean joins in the rendered image."""
 
 import dataclasses
 

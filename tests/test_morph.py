@@ -1,4 +1,4 @@
-"""Garg & Leow sec. 6: the unified leaf space (eq. 10), the NURBS morph path (eq. 11) and linear
+"""Garg & Leow 2011, sec. 6: the unified leaf space (eq. 10), the NURBS morph path (eq. 11) and linear
 key-framing."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Garg & Leow Table 1, Figs 4-6 and 8: the catalogue of unilobed shapes, their waist, base and apex
+"""Garg & Leow 2011, Table 1, Figs 4-6 and 8: the catalogue of unilobed shapes, their waist, base and apex
 types measured on the drawn margins, asymmetric leaves and random instances."""
 
 from __future__ import annotations

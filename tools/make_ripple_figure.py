@@ -1,5 +1,5 @@
 """Regenerate docs/images/ripple_series.png: the maize preset under the parameter series of
-Geng, Hu & Zhang 2014 Figs. 7-9 (β = 1 vs 2; k = 0.3 vs 0.1; θ = 8/10 vs 2/5). Run from the repository root."""
+Geng, Hu & Zhang 2014, Figs 7-9 (β = 1 vs 2; k = 0.3 vs 0.1; θ = 8/10 vs 2/5). Run from the repository root."""
 
 from dataclasses import replace
 

@@ -48,7 +48,7 @@ class FileBar:
         self.show_open = False
         self.show_save_as = False
         self.quit_requested = False
-        self._pending: Callable[[], None] | None = None
+        self._pending: Callable[[], object] | None = None   # what runs once the question is answered
         self._pending_what = ""
         self._want_popup = False
         self._opened_at = 0
@@ -62,8 +62,9 @@ class FileBar:
         return pressed
 
     # -- guarded actions --------------------------------------------------------------------------
-    def request(self, what: str, action: Callable[[], None]) -> None:
-        """Run ``action`` now if nothing is unsaved, else ask (Save / Discard / Cancel) first."""
+    def request(self, what: str, action: Callable[[], object]) -> None:
+        """Run ``action`` now if nothing is unsaved, else ask (Save / Discard / Cancel) first
+        (its result, if any, is ignored)."""
         if not self.state.dirty:
             action()
             return

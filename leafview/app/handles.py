@@ -1,4 +1,4 @@
-"""Direct manipulation (Chaurasia & Beardsley 2017 sec. 6, Fig. 7): the draggable control points in the viewport.
+"""Direct manipulation (Chaurasia & Beardsley 2017, sec. 6, Fig. 7): the draggable control points in the viewport.
 
 Handles are the two free axis control points ``a1``, ``a2`` (dragging them sideways skews the
 leaf: asymmetry, Fig. 7b) and the N inner silhouette control points of each half, ``s1+`` ..

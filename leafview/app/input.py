@@ -45,7 +45,7 @@ class ViewportInput:
         io = imgui.get_io()
         key = imgui.Key
 
-        def pressed(k: Any) -> bool:
+        def pressed(k: imgui.Key) -> bool:
             return imgui.is_key_pressed(k, False)
 
         if io.key_ctrl:
@@ -84,11 +84,11 @@ class ViewportInput:
         v = self.viewer
         mx, my = io.mouse_pos.x, io.mouse_pos.y
         inside = 0.0 <= mx < scene_w and 0.0 <= my < h
-        controls = v.state.view.show_controls and v.overlay is not None
+        overlay = v.overlay if v.state.view.show_controls else None   # the handles, when shown
         if self.drag is None:
             self.hot = None
-            if inside and controls and not io.want_capture_mouse and len(v.overlay.handle_world):
-                self.hot = pick(self._handles_on_screen(scene_w, h), v.overlay.handle_names, mx, my, PICK_RADIUS)
+            if inside and overlay is not None and not io.want_capture_mouse and len(overlay.handle_world):
+                self.hot = pick(self._handles_on_screen(scene_w, h), overlay.handle_names, mx, my, PICK_RADIUS)
         if self.drag is None and inside and not io.want_capture_mouse and not v.files.asking:
             if imgui.is_mouse_clicked(imgui.MouseButton_.left):
                 if self.hot is not None:

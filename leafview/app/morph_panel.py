@@ -1,5 +1,5 @@
 """The viewer's morph panel: pick a source, a target and an optional weighted reference shape from
-the botanical catalogue and drag ``t`` along the morph path of Garg & Leow (eq. 11).
+the botanical catalogue and drag ``t`` along the morph path (Garg & Leow 2011, eq. 11).
 
 :class:`MorphController` holds the choice and turns ``t`` into a leaf shape (no imgui, testable on
 its own): the path's frame at ``t`` (evenly spaced along the path's arc length) is fitted to the
@@ -14,6 +14,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
+
+from imgui_bundle import imgui
 
 from leafview.app.state import ViewerState
 from leafview.botany.catalogue import catalogue_names
@@ -80,7 +82,7 @@ class MorphController:
         self.set_t(self.t, dragging=False)
         self.state.end_gesture()
 
-    def choose(self, **changes: Any) -> bool:
+    def choose(self, **changes: str | float) -> bool:
         """Change ``source``, ``target``, ``reference`` or ``weight`` and re-apply the frame at t."""
         for key, value in changes.items():
             if key in ("source", "target") and value not in _names():
@@ -104,13 +106,11 @@ class MorphPanel:
         self.expand_all = False
 
     def _record(self, key: str) -> None:
-        from imgui_bundle import imgui
 
         lo, hi = imgui.get_item_rect_min(), imgui.get_item_rect_max()
         self.rects[key] = (lo.x, lo.y, min(hi.x, lo.x + imgui.calc_item_width()), hi.y)
 
     def _combo(self, key: str, label: str, items: list[str]) -> None:
-        from imgui_bundle import imgui
 
         c = self.controller
         current = getattr(c, key)
@@ -120,7 +120,6 @@ class MorphPanel:
             c.choose(**{key: items[index]})
 
     def draw(self) -> None:
-        from imgui_bundle import imgui
 
         flags = imgui.Cond_.always if self.expand_all else imgui.Cond_.first_use_ever
         imgui.set_next_item_open(self.expand_all, flags)

@@ -1,5 +1,5 @@
 """Viewport overlays drawn with ``shaders/overlay.vert``/``overlay.frag``: the control polygons
-and curves of A, S±, F± and G± (as in Chaurasia & Beardsley 2017 Figs. 1 and 7), the drag handles and the ground
+and curves of A, S±, F± and G± (as in Chaurasia & Beardsley 2017, Figs 1 and 7), the drag handles and the ground
 grid.
 
 Vertex data is rebuilt only when the leaf changes (the viewer passes its revision); every frame
@@ -63,7 +63,14 @@ def control_lines(params: LeafParams, frame: LeafFrame | None = None) -> NDArray
     return np.concatenate(chunks)
 
 
-def ground_lines(center: Sequence[float], z: float, half: float, step: float) -> NDArray:
+def _uniform(program: moderngl.Program, name: str) -> moderngl.Uniform:
+    """``program[name]`` as the plain uniform it is (moderngl types a lookup as any member kind)."""
+    member = program[name]
+    assert isinstance(member, moderngl.Uniform), f"{name} is not a plain uniform"
+    return member
+
+
+def ground_lines(center: Sequence[float] | NDArray[np.float64], z: float, half: float, step: float) -> NDArray:
     """A square grid of lines in the plane ``z``, centred under ``center`` (world xy)."""
     n = max(1, int(round(half / step)))
     cx, cy = round(center[0] / step) * step, round(center[1] / step) * step
@@ -96,8 +103,8 @@ class Overlay:
         self.frame: LeafFrame | None = None
         self.handle_names: tuple[str, ...] = HANDLE_NAMES
 
-    def update(self, params: LeafParams, revision: int, ground_center: Sequence[float], ground_z: float,
-               ground_half: float) -> None:
+    def update(self, params: LeafParams, revision: int, ground_center: Sequence[float] | NDArray[np.float64],
+               ground_z: float, ground_half: float) -> None:
         """Rebuild the vertex data if the leaf (``revision``) or the ground placement changed."""
         key = (revision, tuple(np.round(ground_center, 6)), round(ground_z, 6), round(ground_half, 6))
         if key == self._key:
@@ -120,9 +127,9 @@ class Overlay:
         if len(raw) > self.vbo.size:
             self.vbo.orphan(1 << (len(raw) - 1).bit_length())
         self.vbo.write(raw)
-        self.program["view_proj"].write(view_proj.T.astype("f4").tobytes())
-        self.program["point_size"].value = float(point_size)
-        self.program["round_points"].value = bool(round_points)
+        _uniform(self.program, "view_proj").write(view_proj.T.astype("f4").tobytes())
+        _uniform(self.program, "point_size").value = float(point_size)
+        _uniform(self.program, "round_points").value = bool(round_points)
         self.vao.render(mode, vertices=len(data))
 
     def draw_ground(self, view_proj: NDArray[np.float64]) -> None:

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import math
 import unicodedata
-from collections.abc import Callable
-from typing import Any
+from collections.abc import Callable, Sequence
+from typing import Any, Literal
 
 import numpy as np
 from imgui_bundle import imgui
@@ -75,6 +75,14 @@ def _is_rows(value: Any) -> bool:
     return isinstance(value, (tuple, list)) and bool(value) and all(_numbers(r) is not None for r in value)
 
 
+Longitudinal = Literal["S", "F", "G"]
+
+
+def _longitudinal_edit(curve: Longitudinal) -> Callable[[LeafParams, float], LeafParams]:
+    """The curvature edit of one longitudinal curve (S, F or G) as a slider's edit function."""
+    return lambda p, z: curve_longitudinal(p, curve, z)
+
+
 class ParamPanel:
     """Draws the parameter widgets inside the current imgui window.
 
@@ -119,6 +127,7 @@ class ParamPanel:
         label = self.label(spec.label, path)
         kind = spec.kind
         vector = _numbers(value)
+        new: bool | int | float | list[float]
         if kind == "bool" or isinstance(value, bool):
             changed, new = imgui.checkbox(label, bool(value))
         elif kind == "int" or (isinstance(value, int) and kind != "float"):
@@ -205,7 +214,7 @@ class ParamPanel:
         self._after_widget(f"edit:{key}")
 
     def draw_edits(self) -> None:
-        """Width scaling, asymmetry and curvature sliders (Chaurasia & Beardsley 2017 sec. 6, Fig. 7)."""
+        """Width scaling, asymmetry and curvature sliders (Chaurasia & Beardsley 2017, sec. 6, Fig. 7)."""
         imgui.set_next_item_open(True, imgui.Cond_.always if self.expand_all else imgui.Cond_.first_use_ever)
         if not imgui.collapsing_header("Edits (Chaurasia & Beardsley 2017 sec. 6)##group-edits"):
             return
@@ -213,10 +222,12 @@ class ParamPanel:
         self._relative_slider("width", "width ×", 0.25, 2.5, "×%.2f", scale_width)
         self._relative_slider("skew", "asymmetry (skew axis)", -0.3, 0.3, "%+.3f", skew_axis)
         self._absolute_slider("axis", "axis curvature", (sh.a1[2] + sh.a2[2]) / 2, curve_axis)
-        for curve, zs in (("S", [r[2] for r in sh.silhouette]), ("F", sh.zf), ("G", sh.zg)):
+        curves: tuple[tuple[Longitudinal, Sequence[float]], ...] = (
+            ("S", [r[2] for r in sh.silhouette]), ("F", sh.zf), ("G", sh.zg))
+        for curve, zs in curves:
             self._absolute_slider(f"curve{curve}", f"{curve} curvature (z̄{curve.lower()})"
                                   if self.unicode_labels else f"{curve} curvature (z{curve.lower()})",
-                                  sum(zs) / 3, lambda p, z, c=curve: curve_longitudinal(p, c, z))
+                                  sum(zs) / 3, _longitudinal_edit(curve))
         imgui.text_disabled("drag the white handles in the viewport:\na1, a2 skew the axis; s1..sN shape the outline")
 
     # -- view settings (not saved with the leaf) ------------------------------------------------

@@ -19,10 +19,10 @@ __all__ = ["GlfwInput", "key_map"]
 _FLT_MAX = 3.4028234663852886e38
 
 
-def key_map() -> dict[int, Any]:
+def key_map() -> dict[int, imgui.Key]:
     """glfw key code → imgui key."""
     k = imgui.Key
-    out: dict[int, Any] = {
+    out: dict[int, imgui.Key] = {
         glfw.KEY_TAB: k.tab, glfw.KEY_BACKSPACE: k.backspace, glfw.KEY_ENTER: k.enter,
         glfw.KEY_ESCAPE: k.escape, glfw.KEY_INSERT: k.insert, glfw.KEY_DELETE: k.delete,
         glfw.KEY_SPACE: k.space, glfw.KEY_LEFT: k.left_arrow, glfw.KEY_RIGHT: k.right_arrow,

@@ -64,7 +64,7 @@ class SceneView:
 
     def __init__(self, ctx: moderngl.Context, scene: Scene) -> None:
         self.ctx, self.scene = ctx, scene
-        self.imgui_ctx = imgui.create_context()
+        self.imgui_ctx: imgui.internal.Context | None = imgui.create_context()   # None once released
         imgui.get_io().set_ini_filename(None)
         self.gui: ImguiRenderer | None = None
         self.renderer: SceneRenderer | None = None
@@ -133,7 +133,7 @@ class SceneView:
         return fbo
 
     def _input(self, io: Any, scene_w: float, h: int) -> None:
-        def pressed(key: Any) -> bool:
+        def pressed(key: imgui.Key) -> bool:
             return imgui.is_key_pressed(key, False) and not io.want_text_input
 
         if pressed(imgui.Key.c):

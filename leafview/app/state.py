@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from leafview.core.defaults import DEFAULT_GRID
-from leafview.core.params import LeafParams, ParamError, field_specs, parse_params
+from leafview.core.params import FieldSpec, LeafParams, ParamError, field_specs, parse_params
 
 __all__ = ["ViewerState", "ViewSettings", "get_field", "with_field", "HISTORY_LIMIT"]
 
@@ -141,7 +141,7 @@ class ViewerState:
         return get_field(self.params, path)
 
     @staticmethod
-    def specs() -> dict[str, Any]:
+    def specs() -> dict[str, FieldSpec]:
         """The field metadata the panel is generated from (new groups appear here)."""
         return field_specs()
 

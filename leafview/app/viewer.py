@@ -14,6 +14,7 @@ import sys
 import time
 import traceback
 from collections import deque
+from collections.abc import Callable
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -37,6 +38,7 @@ from leafview.core.params import LeafParams
 from leafview.deform.surface import tessellate
 from leafview.export.images import ImageWriteError, write_image
 from leafview.gpu.renderer import LeafRenderer, Lighting
+from leafview.gpu.targets import RenderTarget
 from leafview.resources import builtin_presets, preset_dir
 
 __all__ = ["Viewer", "PANEL_WIDTH", "BACKGROUND", "open_state", "is_software"]
@@ -94,7 +96,7 @@ class Viewer:
     def __init__(self, ctx: moderngl.Context, state: ViewerState, *, dev: bool = False, samples: int | None = None,
                  screenshot_dir: str | Path | None = None) -> None:
         self.ctx, self.state = ctx, state
-        self.imgui_ctx = imgui.create_context()
+        self.imgui_ctx: imgui.internal.Context | None = imgui.create_context()   # None once released
         imgui.get_io().set_ini_filename(None)  # never write imgui.ini into the user's directory
         self.unicode_labels = load_font()
         self.gui: ImguiRenderer | None = None
@@ -108,6 +110,7 @@ class Viewer:
             self.release()
             raise
         self.panel = ParamPanel(state, unicode_labels=self.unicode_labels)
+        self.custom_panels: list[Callable[[ViewerState], None]] = []   # see add_panel
         self.morph = MorphPanel(state)
         self.files = FileBar(state, builtin_presets())
         self.camera = OrbitCamera(target=np.zeros(3))
@@ -191,6 +194,14 @@ class Viewer:
             self.fps = len(self._dts) / sum(self._dts)
         return fbo
 
+    def add_panel(self, draw: Callable[[ViewerState], None]) -> None:
+        """Draw ``draw(state)`` in the settings panel every frame, below the parameter groups.
+
+        ``draw`` uses imgui (``from imgui_bundle import imgui``) and edits the leaf through the
+        state (:meth:`ViewerState.set_field`, :meth:`ViewerState.apply`), so its edits are undoable
+        like every other. An exception in it is reported on the panel and never loses the leaf."""
+        self.custom_panels.append(draw)
+
     def _run_ui(self, scene_w: float, w: int, h: int) -> None:
         """Input and panel for this frame. A bug in them must not take the user's work down:
         the exception is reported (terminal and panel), imgui's stacks are unwound and the
@@ -226,6 +237,8 @@ class Viewer:
         self.panel.draw_edits()
         self.morph.draw()
         self.panel.draw_groups()
+        for draw in self.custom_panels:
+            draw(self.state)
         self.panel.draw_view()
         imgui.pop_item_width()
         imgui.end()
@@ -282,25 +295,15 @@ class Viewer:
         """(Re)create the offscreen targets for a frame of w × h pixels."""
         if self._target_key != (w, h):
             self._release_targets()
-            color = self.ctx.renderbuffer((w, h), 4)
-            depth = self.ctx.depth_renderbuffer((w, h))
-            fbo = self.ctx.framebuffer([color], depth)
-            msaa = None
-            objs = [fbo, color, depth]
-            if self.samples:
-                mcolor = self.ctx.renderbuffer((w, h), 4, samples=self.samples)
-                mdepth = self.ctx.depth_renderbuffer((w, h), samples=self.samples)
-                msaa = self.ctx.framebuffer([mcolor], mdepth)
-                objs += [msaa, mcolor, mdepth]
-            self._targets = [msaa, fbo, *objs]
+            target = RenderTarget(self.ctx, (w, h), self.samples)
+            # [multisampled framebuffer or None, resolved framebuffer, owner]
+            self._targets = [target.fbo if target.samples else None, target.resolved, target]
             self._target_key = (w, h)
         return self._targets[1]
 
     def _release_targets(self) -> None:
-        if self._targets:
-            self.ctx.detect_framebuffer(0).use()
-            for obj in self._targets[2:]:
-                obj.release()
+        for target in self._targets[2:]:
+            target.release()
         self._targets, self._target_key = [], None
 
     def read_frame(self, viewport: tuple[int, int, int, int] | None = None) -> NDArray[np.uint8]:

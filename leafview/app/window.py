@@ -69,7 +69,12 @@ class ViewerWindow:
             except Exception as exc:
                 raise GLUnavailable(f"{NO_DISPLAY_HELP}\n  (moderngl: {exc})") from None
             # the leaf editor, or another view with the same frame interface (the scene viewer)
-            self.viewer = make_view(self.ctx) if make_view else Viewer(self.ctx, state, dev=dev, samples=samples)
+            if make_view is not None:
+                self.viewer = make_view(self.ctx)
+            elif state is not None:
+                self.viewer = Viewer(self.ctx, state, dev=dev, samples=samples)
+            else:
+                raise TypeError("ViewerWindow needs a ViewerState or make_view")
             self.input = GlfwInput(self.window)
             glfw.set_window_close_callback(self.window, self._on_close)
         except BaseException:
@@ -131,7 +136,7 @@ class ViewerWindow:
         scripted = frames is not None
         n = 0
         try:
-            while not scripted or n < frames:
+            while frames is None or n < frames:
                 if not self.step(wait=not scripted):
                     break
                 n += 1

@@ -1,7 +1,7 @@
-"""Asymmetric leaves (Garg & Leow Fig. 6) in the shader model: one leaf per side of the midrib.
+"""Asymmetric leaves (Garg & Leow 2011, Fig. 6) in the shader model: one leaf per side of the midrib.
 
 The shader model Ω is mirror-symmetric about its axis: both halves of the blade share the
-silhouette rows (Chaurasia & Beardsley 2017 eqs 3-6). A landmark leaf whose sides differ is therefore drawn as two
+silhouette rows (Chaurasia & Beardsley 2017, eqs 3-6). A landmark leaf whose sides differ is therefore drawn as two
 one-sided leaves (``shape.half``): the side x > 0 (the u < 0 half, ``half = -1``) is fitted to the
 right margin alone, the side x < 0 (``half = +1``) to the left margin mirrored, each with
 :func:`leafview.botany.outline_fit.fit_outline`. Both keep the straight axis A(v) = (0, v, 0), and
@@ -72,7 +72,8 @@ def shader_leaves(leaf: LandmarkLeaf, *, n: int = 256, target: float = DEFAULT_T
     right, left = outline_sides(leaf, n)
     if leaf.is_symmetric:
         fit = fit_outline(right=right, left=left, target=target, polish=polish, name=name)
-        return ShaderLeaves((fit.params,), float(fit.error), tuple(float(e) for e in fit.error_sides))
+        er, el = fit.error_sides
+        return ShaderLeaves((fit.params,), float(fit.error), (float(er), float(el)))
     mirror = np.array([-1.0, 1.0])
     fr = fit_outline(right=right, target=target, polish=polish)
     fl = fit_outline(right=left * mirror, target=target, polish=polish)

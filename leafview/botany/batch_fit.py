@@ -2,8 +2,8 @@
 
 :func:`leafview.botany.outline_fit.fit_outline` fits one outline in about 0.2 s (least-squares
 polish) or 0.025 s (linear least squares with parameter correction, up to 3.5 % off). Random
-instances of the catalogue (Garg & Leow Fig. 8) come by the hundred, so this module fits the same
-model, the right-side silhouette S of Chaurasia & Beardsley 2017 eq. 1 (a Bézier of degree N + 1 from the base
+instances of the catalogue (Garg & Leow 2011, Fig. 8) come by the hundred, so this module fits the same
+model, the right-side silhouette S of Chaurasia & Beardsley 2017, eq. 1 (a Bézier of degree N + 1 from the base
 (0, 0) to the apex (0, 1), straight axis, eq. 3 with tilt for the rows), to a whole batch with
 stacked arrays:
 
@@ -629,7 +629,7 @@ def fit_outlines(outlines: ArrayLike | None = None, *, right: ArrayLike | None =
     def keep_better(ctrl: NDArray[np.float64], n_rows: int) -> NDArray[np.bool_]:
         """Measure the fits ``ctrl`` of the leaves ``todo``, keep each where it beats the leaf's
         best so far (no fold first, then the smaller error); True where it meets the target."""
-        fitted = [_params_from_controls(c, names[i]) for c, i in zip(ctrl, todo)]
+        fitted = [_params_from_controls(c, names[int(i)]) for c, i in zip(ctrl, todo)]
         err = meter(controls_from_params(fitted), todo)
         jmin = np.array([float(_jacobian_grid(c).min()) for c in ctrl])
         for k, i in enumerate(todo):
@@ -656,7 +656,7 @@ def fit_outlines(outlines: ArrayLike | None = None, *, right: ArrayLike | None =
     t_fb = time.perf_counter()
     if fallback:
         for i in todo:
-            fit = fit_outline(right=r[i], left=lt[i], target=target, min_rows=min_rows, max_rows=max_rows, name=names[i])
+            fit = fit_outline(right=r[i], left=lt[i], target=target, min_rows=min_rows, max_rows=max_rows, name=names[int(i)])
             c = controls_from_params([fit.params])[0]
             j = float(_jacobian_grid(c).min())
             if (j > 0.0, -fit.error) > (jac[i] > 0.0, -errors[i, 0]):
@@ -667,7 +667,7 @@ def fit_outlines(outlines: ArrayLike | None = None, *, right: ArrayLike | None =
                     attempts, time.perf_counter() - t0, fb_seconds, float(target))
 
 
-def fit_landmark_leaves(leaves: Sequence[Any], *, n: int = 128, **options: Any) -> BatchFit:
+def fit_landmark_leaves(leaves: Sequence[LandmarkLeaf], *, n: int = 128, **options: Any) -> BatchFit:
     """Fit Ω to a batch of :class:`~leafview.botany.landmarks.LandmarkLeaf` (their margins sampled
     with :func:`~leafview.botany.landmarks.outline`, ``n`` points per side); ``options`` go to
     :func:`fit_outlines`. Leaf names carry over."""

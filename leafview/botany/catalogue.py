@@ -1,4 +1,4 @@
-"""The botanical catalogue of unilobed leaf shapes (Garg & Leow, Table 1, Figs 4-6 and 8).
+"""The botanical catalogue of unilobed leaf shapes (Garg & Leow 2011, Table 1, Figs 4-6 and 8).
 
 A shape type is a waist type (where the blade is widest: elliptic = middle, ovate = low,
 obovate = high, oblong = parallel-sided middle, linear = width < 1/10 of length) combined with a
@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomli_w
 
 from leafview.atomic import atomic_output
 from leafview.botany.landmarks import LandmarkLeaf, SideLandmarks, check_margin, outline, outline_sides
@@ -399,7 +400,6 @@ def random_instance(leaf: LandmarkLeaf | str, seed: int, amount: float = 0.2, *,
 
 def dumps_landmark_leaf(leaf: LandmarkLeaf) -> str:
     """TOML text of a landmark leaf (``landmarks = 1``, angles in degrees)."""
-    import tomli_w
 
     return tomli_w.dumps(leaf.to_dict())
 

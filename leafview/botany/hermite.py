@@ -1,4 +1,4 @@
-"""Quadratic B-spline through points with prescribed tangent directions (Garg & Leow eqs 2-6).
+"""Quadratic B-spline through points with prescribed tangent directions (Garg & Leow 2011, eqs 2-6).
 
 The margin fit of the landmark model (:mod:`leafview.botany.landmarks`): N landmarks p_i with unit
 tangents t_i give 2N linear equations (eqs 3-4) for the 2N control points of a degree-2 B-spline,

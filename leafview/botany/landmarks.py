@@ -1,4 +1,4 @@
-"""The landmark leaf model of Garg & Leow (Garg & Leow 2011, secs 4.1-4.2).
+"""The landmark leaf model (Garg & Leow 2011, secs 4.1-4.2).
 
 One side of a unilobed leaf is a margin through a few landmark points, each with a unit tangent:
 
@@ -356,7 +356,8 @@ def _self_crossing(poly: NDArray[np.float64]) -> int | None:
     """Index of a segment that properly crosses a non-adjacent one, or None."""
     a, b = poly[:-1], poly[1:]
 
-    def orient(p, q, r):  # sign of the turn p -> q -> r, broadcast over pairs
+    def orient(p: NDArray[np.float64], q: NDArray[np.float64], r: NDArray[np.float64]) -> NDArray[np.float64]:
+        # sign of the turn p -> q -> r, broadcast over pairs
         return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
 
     A, B = a[:, None], b[:, None]

@@ -1,4 +1,4 @@
-"""Multilobed leaves (Garg & Leow sec. 5): palmate, pinnate and bilobed leaves built from
+"""Multilobed leaves (Garg & Leow 2011, sec. 5): palmate, pinnate and bilobed leaves built from
 unilobed lobes, each a shader-model leaf in its own frame.
 
 Placement. A lobed leaf has a primary vein along +y from the base (0, 0) to (0, 1). ``half``
@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 import os
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -167,7 +167,10 @@ def scale_width_exact(params: LeafParams, factor: float) -> LeafParams:
     return params.replace(shape=replace(sh, silhouette=rows, tilt=tilt))
 
 
-def _part_params(part: LobePlacement, z: float, material: Material, shape_source: Any) -> LeafParams:
+ShapeSource = Callable[[str], LeafParams]   # catalogue name -> its fitted leaf
+
+
+def _part_params(part: LobePlacement, z: float, material: Material, shape_source: ShapeSource) -> LeafParams:
     base = shape_source(part.shape)
     if part.width != 1.0:
         base = scale_width_exact(base, part.width)
@@ -176,7 +179,7 @@ def _part_params(part: LobePlacement, z: float, material: Material, shape_source
     return base.replace(transform=t, material=material, name=f"{part.role}:{part.shape}")
 
 
-def lobe_leaves(leaf: LobedLeaf, shape_source: Any = None) -> list[LeafParams]:
+def lobe_leaves(leaf: LobedLeaf, shape_source: ShapeSource | None = None) -> list[LeafParams]:
     """One :class:`LeafParams` per part, placed by its transform (rotation about z, scale =
     length, translation = base + its z level): the leaves to draw together. ``shape_source``
     maps a catalogue name to its fitted leaf (default :func:`leafview.botany.shapes.shapes_params`)."""
@@ -186,7 +189,7 @@ def lobe_leaves(leaf: LobedLeaf, shape_source: Any = None) -> list[LeafParams]:
     return [_part_params(p, k * Z_STEP, leaf.material, shape_source) for k, p in enumerate(parts)]
 
 
-def lobe_outlines(leaf: LobedLeaf, shape_source: Any = None, n: int = 257) -> list[NDArray[np.float64]]:
+def lobe_outlines(leaf: LobedLeaf, shape_source: ShapeSource | None = None, n: int = 257) -> list[NDArray[np.float64]]:
     """The margin of every part in the leaf frame (closed (2n, 2) polylines), from the fitted
     leaves (the u = ±1 curves of eq. 6) and their transforms."""
 
@@ -213,7 +216,7 @@ def _segment_hits(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.
     return p[i] + t[ok][:, None] * r[i]
 
 
-def valleys(leaf: LobedLeaf, shape_source: Any = None) -> list[NDArray[np.float64] | None]:
+def valleys(leaf: LobedLeaf, shape_source: ShapeSource | None = None) -> list[NDArray[np.float64] | None]:
     """The valley between each pair of angularly adjacent parts on each side: the crossing of
     their margins farthest from the base (sec. 5), or None where the margins do not cross (the
     web, if any, closes that valley)."""

@@ -1,4 +1,4 @@
-"""Constrained leaf morphing in leaf space (Garg & Leow, sec. 6).
+"""Constrained leaf morphing in leaf space (Garg & Leow 2011, sec. 6).
 
 A leaf is a point of a *leaf space*: per side the free parameters of eq. 1,
 
@@ -26,8 +26,9 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -128,7 +129,8 @@ def leaf_from_vector(vector: ArrayLike, space: LeafSpace, name: str = "") -> Lan
     sides = []
     i = 0
     for which in ("right", "left"):
-        kw: dict = {"theta_b": v[i], "theta_a": v[i + 1], "waist": (v[i + 2], v[i + 3])}
+        # keyword arguments of SideLandmarks: angles (float) and points (pairs of floats)
+        kw: dict[str, Any] = {"theta_b": v[i], "theta_a": v[i + 1], "waist": (v[i + 2], v[i + 3])}
         i += 4
         if getattr(space, f"{which}_tail"):
             kw.update(tail=(v[i], v[i + 1]), tail_angle=v[i + 2])
@@ -137,8 +139,8 @@ def leaf_from_vector(vector: ArrayLike, space: LeafSpace, name: str = "") -> Lan
             kw.update(shoulder=(v[i], v[i + 1]), shoulder_angle=v[i + 2])
             i += 3
         try:
-            sides.append(SideLandmarks(**{k: (float(x) if np.ndim(x) == 0 else tuple(map(float, x)))
-                                          for k, x in kw.items()}))
+            args: dict[str, Any] = {k: (float(x) if np.ndim(x) == 0 else tuple(map(float, x))) for k, x in kw.items()}
+            sides.append(SideLandmarks(**args))
         except ParamError as exc:
             raise ParamError(f"{which}.{exc.path}", exc.message) from None
     return LandmarkLeaf(sides[0], sides[1], name)
@@ -239,7 +241,10 @@ def insertion_error(original: LandmarkLeaf, unified: LandmarkLeaf, n: int = 256)
 # eq. 11: the morph path, and linear key-framing
 # ---------------------------------------------------------------------------------------------
 
-def _arclength_inverse(curve, samples: int = 2049) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+ArcTable = tuple[NDArray[np.float64], NDArray[np.float64], float]   # (u, arc length at u, total length)
+
+
+def _arclength_inverse(curve: Callable[[ArrayLike], NDArray[np.float64]], samples: int = 2049) -> ArcTable:
     u = np.linspace(0.0, 1.0, samples)
     p = curve(u)
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
@@ -253,7 +258,7 @@ class _Path(ABC):
     space: LeafSpace
     shapes: list[LandmarkLeaf]        # unified: source, references..., target
     originals: list[LandmarkLeaf]
-    _table: tuple | None = field(default=None, init=False, repr=False)
+    _table: ArcTable | None = field(default=None, init=False, repr=False)
 
     @abstractmethod
     def __call__(self, u: ArrayLike) -> NDArray[np.float64]:
@@ -269,7 +274,7 @@ class _Path(ABC):
         """Length of the path in leaf space."""
         return self._arc()[2]
 
-    def _arc(self) -> tuple:
+    def _arc(self) -> ArcTable:
         if self._table is None:
             self._table = _arclength_inverse(self)
         return self._table
@@ -351,8 +356,8 @@ class KeyframePath(_Path):
         return np.stack([np.interp(u, keys, r[:, j]) for j in range(r.shape[1])], axis=-1)
 
 
-def _prepare(source: LandmarkLeaf, target: LandmarkLeaf, refs: Sequence[tuple[LandmarkLeaf, float]]
-             ) -> tuple[list[LandmarkLeaf], NDArray[np.float64]]:
+def _prepare(source: LandmarkLeaf | str, target: LandmarkLeaf | str,
+             refs: Sequence[tuple[LandmarkLeaf | str, float]]) -> tuple[list[LandmarkLeaf], NDArray[np.float64]]:
 
     def as_leaf(x: LandmarkLeaf | str, what: str) -> LandmarkLeaf:
         if isinstance(x, str):

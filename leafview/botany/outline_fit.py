@@ -1,12 +1,12 @@
 """Fit the shader model Ω to a leaf margin (a closed outline polyline) by least squares.
 
 The target is an outline in leaf space, base at (0, 0) and apex at (0, 1), as written by
-:func:`leafview.botany.landmarks.outline` (Garg & Leow eqs 2-6): the right side (x > 0) from the
+:func:`leafview.botany.landmarks.outline` (Garg & Leow 2011, eqs 2-6): the right side (x > 0) from the
 base up to the apex, then the left side back down. The result is a :class:`LeafParams` whose
-margin (the ``u = ±1`` curves of :func:`leafview.deform.surface.evaluate`, Chaurasia & Beardsley 2017 eqs 3-6) follows
+margin (the ``u = ±1`` curves of :func:`leafview.deform.surface.evaluate`, Chaurasia & Beardsley 2017, eqs 3-6) follows
 that outline, so every catalogue shape renders through the shader path.
 
-How (Chaurasia & Beardsley 2017 sec. 3; the fit itself is ours):
+How (Chaurasia & Beardsley 2017, sec. 3; the fit itself is ours):
 
 1. The axis A stays straight, ``a1 = (0, 1/3, 0)``, ``a2 = (0, 2/3, 0)``, so ``A(v) = (0, v, 0)``
    and ``n = -x`` (eq. 2). The model is mirror-symmetric about the axis; an asymmetric outline is
@@ -206,8 +206,8 @@ def _linear_fit(pts: NDArray[np.float64], t: NDArray[np.float64], n: int) -> NDA
     """Inner control points of the degree-n Bézier with fixed ends minimising Σ|B(t_j) - p_j|²."""
     b = bernstein(n, t)
     rhs = pts - np.outer(b[:, n], [0.0, 1.0])
-    inner, *_ = np.linalg.lstsq(b[:, 1:n], rhs, rcond=None)
-    return inner
+    inner = np.linalg.lstsq(b[:, 1:n], rhs, rcond=None)[0]
+    return np.asarray(inner, dtype=np.float64)
 
 
 def fit_side(points: ArrayLike, rows: int, *, iterations: int = 12, polish: bool = True
@@ -229,17 +229,18 @@ def fit_side(points: ArrayLike, rows: int, *, iterations: int = 12, polish: bool
     return _controls(_polish(pts, t, inner, n))
 
 
-def _polish(pts, t, inner, n):
+def _polish(pts: NDArray[np.float64], t: NDArray[np.float64], inner: NDArray[np.float64], n: int
+            ) -> NDArray[np.float64]:
     """Joint refinement of the inner control points and the sample parameters (each sample's
     parameter is its own variable in [0, 1], so the Jacobian is sparse: finite differences need
     one column group per control coordinate plus one for all the parameters)."""
     k = len(pts)
     nc = 2 * (n - 1)
 
-    def unpack(x):
+    def unpack(x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         return x[:nc].reshape(n - 1, 2), np.r_[0.0, x[nc:], 1.0]
 
-    def residuals(x):
+    def residuals(x: NDArray[np.float64]) -> NDArray[np.float64]:
         c, tt = unpack(x)
         ctrl = _controls(c)
         fit = (bernstein(n, tt) @ ctrl - pts).ravel()
@@ -395,6 +396,7 @@ def fit_outline(outline: ArrayLike | None = None, *, right: ArrayLike | None = N
                 best = (err, params, (er, el), jac)
             if err <= target and jac > 0.0:
                 break
+        assert best is not None     # the linear stage of every row count sets it
         if best[0] <= target and best[3] > 0.0:
             break
     assert best is not None

@@ -1,4 +1,4 @@
-"""Botanical leaf shapes (Garg & Leow, Table 1 and Fig. 5) as shader-model leaves.
+"""Botanical leaf shapes (Garg & Leow 2011, Table 1 and Fig. 5) as shader-model leaves.
 
 The landmark model (:mod:`leafview.botany.catalogue`) describes a margin; :mod:`leafview.botany.outline_fit`
 fits the shader model Ω to it. The fits of the 62 catalogue entries are precomputed into
@@ -16,15 +16,18 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from difflib import get_close_matches
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from leafview.botany.batch_fit import fit_landmark_leaves
 from leafview.botany.catalogue import ShapeEntry, landmark_leaf, random_instance
 from leafview.botany.catalogue import catalogue as _catalogue
 from leafview.botany.landmarks import LandmarkLeaf, outline
-from leafview.botany.outline_fit import fit_outline
+from leafview.botany.outline_fit import OutlineFit, fit_outline
 from leafview.core.defaults import INSTANCE_FIT_TARGET
 from leafview.core.params import LeafParams, ParamError
 from leafview.resources import asset_dir
@@ -36,7 +39,7 @@ __all__ = ["INSTANCE_TARGET", "ShapeEntry", "ShapeFitInfo", "catalogue", "landma
 
 
 def catalogue() -> list[ShapeEntry]:
-    """The 62 catalogue shapes (Garg & Leow Table 1 and Fig. 5) as :class:`ShapeEntry` rows:
+    """The 62 catalogue shapes (Garg & Leow 2011, Table 1 and Fig. 5) as :class:`ShapeEntry` rows:
     ``name``, ``waist``, ``base``, ``apex``, ``unilobed``, ``table1``, ``named`` and the recipe.
     Same list as :func:`leafview.botany.catalogue.catalogue`; :func:`fit_info` gives each one's fit."""
     return _catalogue()
@@ -81,7 +84,6 @@ def fit_info(name: str) -> ShapeFitInfo:
     """The recorded fit of catalogue shape ``name``; :class:`ParamError` for unknown names."""
     index = _index()
     if name not in index:
-        from difflib import get_close_matches
 
         near = get_close_matches(name, list(index), n=3)
         hint = f" (did you mean {', '.join(near)}?)" if near else " (`leafview shapes` lists them)"
@@ -89,7 +91,7 @@ def fit_info(name: str) -> ShapeFitInfo:
     return index[name]
 
 
-def fit_landmark_leaf(leaf: Any, *, polish: bool = True, n: int = 256, **kwargs: Any) -> Any:
+def fit_landmark_leaf(leaf: LandmarkLeaf, *, polish: bool = True, n: int = 256, **kwargs: Any) -> OutlineFit:
     """Fit Ω to a :class:`~leafview.botany.landmarks.LandmarkLeaf`; returns the
     :class:`~leafview.botany.outline_fit.OutlineFit`."""
 
@@ -106,7 +108,7 @@ def shapes_params(name: str, seed: int | None = None, *, amount: float = 0.2, po
         ``"ovate-extended-convex"``.
     seed
         None: the precomputed fit of the shape itself. An integer: a random instance of the shape
-        (Garg & Leow Fig. 8, landmark parameters perturbed by up to ``amount``), fitted now.
+        (Garg & Leow 2011, Fig. 8, landmark parameters perturbed by up to ``amount``), fitted now.
     polish
         For random instances: run the least-squares polish (slower, closer; see
         :func:`~leafview.botany.outline_fit.fit_outline`).
@@ -125,9 +127,14 @@ def _load(name: str) -> LeafParams:
     return LeafParams.load(shapes_dir() / f"{name}.toml")
 
 
-def instances(names_or_leaves: Any, seeds: Any, amount: float = 0.2, *, target: float = INSTANCE_TARGET,
-              n: int = 128) -> list[LeafParams]:
-    """Random instances (Garg & Leow Fig. 8) of catalogue shapes, fitted together.
+LeafOrName = str | LandmarkLeaf
+Seed = int | np.integer[Any]
+
+
+def instances(names_or_leaves: LeafOrName | list[LeafOrName] | tuple[LeafOrName, ...],
+              seeds: Seed | list[Seed] | tuple[Seed, ...] | range, amount: float = 0.2, *,
+              target: float = INSTANCE_TARGET, n: int = 128) -> list[LeafParams]:
+    """Random instances (Garg & Leow 2011, Fig. 8) of catalogue shapes, fitted together.
 
     The batched counterpart of ``shapes_params(name, seed)``: every leaf's landmarks are perturbed
     by up to ``amount`` (:func:`~leafview.botany.catalogue.random_instance`), then all margins are
@@ -149,7 +156,6 @@ def instances(names_or_leaves: Any, seeds: Any, amount: float = 0.2, *, target: 
     list of LeafParams
         Named ``"<name>#<seed>"``, in input order.
     """
-    import numpy as np
 
 
     many = list(names_or_leaves) if isinstance(names_or_leaves, (list, tuple)) else [names_or_leaves]

@@ -1,4 +1,4 @@
-"""Reference evaluation of the leaf surface L_Ω(u, v) (Chaurasia & Beardsley 2017 sec. 3, eqs 1-6) in float64.
+"""Reference evaluation of the leaf surface L_Ω(u, v) (Chaurasia & Beardsley 2017, sec. 3, eqs 1-6) in float64.
 
 Conventions (the GLSL in ``shaders/leaf_eval.glsl`` follows them line for line):
 
@@ -55,7 +55,7 @@ __all__ = [
 ]
 
 JITTER_TABLE_SIZE = 256
-BASE = np.zeros(3)                # fixed base and apex of every leaf (Chaurasia & Beardsley 2017 sec. 3)
+BASE = np.zeros(3)                # fixed base and apex of every leaf (Chaurasia & Beardsley 2017, sec. 3)
 APEX = np.array([0.0, 1.0, 0.0])
 
 
@@ -167,7 +167,7 @@ Arr = NDArray[np.float64]
 
 
 def blade_partials(params: LeafParams, u: ArrayLike, v: ArrayLike) -> tuple[Partials, Arr, Arr, Arr, Arr, Arr]:
-    """The undeformed blade: L, ∂L/∂u, ∂L/∂v and ∂²L/∂u∂v of eqs 1-6 (Chaurasia & Beardsley 2017)
+    """The undeformed blade: L, ∂L/∂u, ∂L/∂v and ∂²L/∂u∂v (Chaurasia & Beardsley 2017, eqs 1-6)
     with the jitter of sec. 6 when enabled, but no ripple or bending.
 
     Returns the partials and what the deformations need: ``s = |u|``, ``σ``, ``v`` (flattened),
@@ -213,7 +213,8 @@ def tip_taper(vv: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.
     return 1.0 - w**4, -8.0 * w**3
 
 
-def _add_jitter(params, s, sigma, vv, pa_d, L, Lu, Lv, Luv):
+def _add_jitter(params: LeafParams, s: Arr, sigma: Arr, vv: Arr, pa_d: Arr,
+                L: Arr, Lu: Arr, Lv: Arr, Luv: Arr) -> tuple[Arr, Arr, Arr, Arr]:
     jit = params.jitter
     table = jitter_table(jit).astype(np.float64)
     size = table.shape[0]

@@ -9,7 +9,7 @@ A compact leaf document (``*.leaf.json``)::
 * ``leafview`` is the format version (:data:`COMPACT_VERSION`); it is also how loaders tell
   this form from the full one (which starts with ``schema``).
 * ``omega`` is Ω in the order of :meth:`LeafParams.to_vector <leafview.core.params.LeafParams.to_vector>`:
-  21 numbers for the paper's quartic (Chaurasia & Beardsley 2017 eqs 3-4), 6 + 6N for an extended silhouette of N
+  21 numbers for the paper's quartic (Chaurasia & Beardsley 2017, eqs 3-4), 6 + 6N for an extended silhouette of N
   rows with tilts.
 * ``half`` (-1 or 1) appears only for a one-sided leaf (:attr:`Shape.half`).
 * ``jitter``, ``material``, ``transform``, ``ripple`` and ``bending`` hold only the fields that

@@ -1,4 +1,4 @@
-"""The artist edits of Chaurasia & Beardsley 2017 sec. 6 as pure functions returning new parameters.
+"""The artist edits of Chaurasia & Beardsley 2017, sec. 6 as pure functions returning new parameters.
 
 Base and apex stay fixed; the axis control points are edited directly, everything else is a
 displacement relative to the axis, so every edit acts on both halves of the leaf at once.

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -65,7 +66,6 @@ def read_document(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 def _toml_position(message: str) -> tuple[int, int]:
     # tomllib reports "... (at line L, column C)" or "(at end of document)"
-    import re
 
     m = re.search(r"line (\d+), column (\d+)", message)
     return (int(m.group(1)), int(m.group(2))) if m else (0, 0)

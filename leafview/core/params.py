@@ -1,4 +1,4 @@
-"""Leaf parameters: the 21-number shape vector Ω of Chaurasia & Beardsley 2017 sec. 3 plus jitter, material and
+"""Leaf parameters: the 21-number shape vector Ω of Chaurasia & Beardsley 2017, sec. 3 plus jitter, material and
 world transform, with validation that names the offending field.
 
 Layout of Ω (``to_vector`` / ``from_vector``)::
@@ -8,7 +8,7 @@ Layout of Ω (``to_vector`` / ``from_vector``)::
 The axis A is cubic with fixed base (0,0,0) and apex (0,1,0); S, F and G are quartic and share
 base and apex with it (eqs 3-4).
 
-Extended silhouettes. Seed 004 defines S, F and G for any degree n (n - 1 inner control points;
+Extended silhouettes. Chaurasia & Beardsley 2017, sec. 3, define S, F and G for any degree n (n - 1 inner control points;
 the paper picks n = 4, giving 21 numbers). ``shape.silhouette`` may hold N = 3 ..
 :data:`MAX_SILHOUETTE_ROWS` rows, making S, F and G of degree N + 1, with one z̄f and one z̄g
 per row. Each row may also be *tilted* (``shape.tilt``, degrees): its control point is displaced
@@ -73,7 +73,8 @@ class FieldSpec:
     positive: bool = False  # strictly greater than zero
 
 
-def _spec(label: str, group: str, lo: float, hi: float, step: float, *, hard=(None, None),
+def _spec(label: str, group: str, lo: float, hi: float, step: float, *,
+          hard: tuple[float | None, float | None] = (None, None),
           kind: str = "float", positive: bool = False, default: Any) -> Any:
     spec = FieldSpec(label, group, (lo, hi), step, hard, kind, positive)
     return field(default=default, metadata={"spec": spec})
@@ -138,7 +139,7 @@ class Shape:
 
 @dataclass(frozen=True)
 class Jitter:
-    """Serrated margin (Chaurasia & Beardsley 2017 sec. 6): a periodic table of ``table_size`` values in [0, 1]
+    """Serrated margin (Chaurasia & Beardsley 2017, sec. 6): a periodic table of ``table_size`` values in [0, 1]
     drawn from ``seed``, read at ``v · density``; ``amplitude`` is the largest outward offset in
     leaf lengths (the paper's "degree")."""
 
@@ -163,7 +164,7 @@ class Material:
 
 @dataclass(frozen=True)
 class Transform:
-    """World placement, kept apart from the shape (Chaurasia & Beardsley 2017 sec. 3, "coordinate frames")."""
+    """World placement, kept apart from the shape (Chaurasia & Beardsley 2017, sec. 3, "coordinate frames")."""
 
     translation: Vec3 = _spec("translation", "transform", -5, 5, 0.01, kind="vec3",
                               default=(0.0, 0.0, 0.0))
@@ -206,8 +207,9 @@ class Transform:
         else:  # gimbal lock: only a - c (or a + c) is defined; put it all in a
             a_ = math.atan2(-r[1, 2], r[1, 1])
             c = 0.0
-        angles = tuple(float(math.degrees(x)) for x in (a_, b, c))
-        return cls(translation=tuple(float(x) for x in a[:3, 3]), rotation=angles, scale=scale)
+        angles = (math.degrees(a_), math.degrees(b), math.degrees(c))
+        translation = (float(a[0, 3]), float(a[1, 3]), float(a[2, 3]))
+        return cls(translation=translation, rotation=angles, scale=scale)
 
 
 Pair = tuple[float, float]
@@ -215,7 +217,7 @@ Pair = tuple[float, float]
 
 @dataclass(frozen=True)
 class Ripple:
-    """Rippled margins (Geng, Hu & Zhang 2014 sec. 5.2.3, eq. 5). Each cross-section is a secondary vein, a
+    """Rippled margins (Geng, Hu & Zhang 2014, sec. 5.2.3, eq. 5). Each cross-section is a secondary vein, a
     cantilever from the midrib, under the turbulent load ``P [λ + (1 - λ) N(k i + θ)]`` with
     ``N`` the fBm signal of ``beta`` and ``seed`` and ``i = veins · v``. Pairs are
     ``[left, right]`` as seen in the top view (left: the u >= 0 half, -x)."""
@@ -237,7 +239,7 @@ class Ripple:
 
 @dataclass(frozen=True)
 class Bending:
-    """Cantilever bending of the midrib and petiole (Geng, Hu & Zhang 2014 sec. 4, eq. 4, and sec. 5.2.2) under
+    """Cantilever bending of the midrib and petiole (Geng, Hu & Zhang 2014, sec. 4, eq. 4, and sec. 5.2.2) under
     a load along ``direction`` (world space, default gravity), and a twist about the midrib that
     grows linearly to ``twist`` degrees at the apex. ``load`` is per unit blade area; only
     ``load / stiffness`` matters for the shape."""

@@ -1,8 +1,8 @@
 """The JSON Schema of the leaf parameter file, generated from the parameter dataclasses.
 
 A leaf file (TOML or JSON, see :mod:`leafview.core.io`) holds ``schema``, an optional
-``name`` and the groups of :class:`~leafview.core.params.LeafParams` (``shape`` is Ω of Chaurasia & Beardsley 2017
-sec. 3, eqs 3-4; ``jitter`` sec. 6; ``ripple`` and ``bending`` Geng, Hu & Zhang 2014 eqs 4-5; ``material``;
+``name`` and the groups of :class:`~leafview.core.params.LeafParams` (``shape`` is Ω of Chaurasia & Beardsley 2017,
+sec. 3, eqs 3-4; ``jitter`` sec. 6; ``ripple`` and ``bending`` Geng, Hu & Zhang 2014, eqs 4-5; ``material``;
 ``transform``). :func:`leaf_schema` builds a JSON Schema (draft 2020-12) of that document from
 :func:`~leafview.core.params.field_specs` and the dataclass defaults, so it follows the code:
 
@@ -27,7 +27,7 @@ schema, and the published copies of all three, live in :mod:`leafview.scene.sche
 from __future__ import annotations
 
 import copy
-from dataclasses import fields
+from dataclasses import MISSING, fields
 from typing import Any
 
 from leafview.core import params as P
@@ -41,10 +41,12 @@ DIALECT = "https://json-schema.org/draft/2020-12/schema"
 
 def _groups() -> dict[str, type]:
     """Group name -> dataclass, in LeafParams field order."""
-    out = {}
+    out: dict[str, type] = {}
     for f in fields(P.LeafParams):
         if f.name != "name":
-            out[f.name] = type(f.default_factory())  # type: ignore[misc]
+            if f.default_factory is MISSING:
+                raise TypeError(f"LeafParams.{f.name} is a group without a default factory")
+            out[f.name] = type(f.default_factory())
     return out
 
 
@@ -145,7 +147,7 @@ def leaf_schema() -> dict[str, Any]:
         "$schema": DIALECT,
         "$id": SCHEMA_ID,
         "title": "leafview leaf parameters",
-        "description": ("One parametric leaf (leafview): the Bézier shape vector Ω of Chaurasia & Beardsley "
+        "description": ("One parametric leaf (leafview): the Bézier shape vector Ω "
                         "(Chaurasia & Beardsley 2017, eqs 3-4), jitter, ripples and bending (Geng, Hu & Zhang 2014, eqs 4-5), material and "
                         "placement. Stored as TOML or JSON. Lengths are in leaf lengths (base (0,0,0), apex "
                         "(0,1,0)); angles in degrees; colours linear RGB."),
@@ -161,10 +163,10 @@ def _omega_schema() -> dict[str, Any]:
     bounded as its shape field is (v̄ inside (0, 1), tilts within ±90°)."""
 
     specs = P.field_specs()
-    vbar = {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1}
-    plain = {"type": "number"}
+    vbar: dict[str, Any] = {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1}
+    plain: dict[str, Any] = {"type": "number"}
     tilt = _number(specs["shape.tilt"])
-    alternatives = []
+    alternatives: list[dict[str, Any]] = []
     for size, n in P.omega_sizes().items():
         items = [plain] * 6
         for _ in range(n):
@@ -211,7 +213,7 @@ def compact_schema() -> dict[str, Any]:
         "$schema": DIALECT,
         "$id": f"urn:leafview:schema:leaf-compact:{COMPACT_VERSION}",
         "title": "leafview compact leaf",
-        "description": ("One parametric leaf in the compact form: Ω as one list (Chaurasia & Beardsley 2017 eqs 3-4) and only the "
+        "description": ("One parametric leaf in the compact form: Ω as one list (Chaurasia & Beardsley 2017, eqs 3-4) and only the "
                         "settings that differ from their defaults (the defaults are the 'default' values in "
                         "leaf.schema.json); or a leaf set {\"leafview\": 1, \"leaves\": [...]}. Numbers are "
                         "the shortest decimals that read back to the same float64."),

@@ -1,4 +1,4 @@
-"""Cantilever-beam bending (Geng, Hu & Zhang 2014 sec. 4, eq. 4) of the midrib and petiole, and the bend
+"""Cantilever-beam bending (Geng, Hu & Zhang 2014, sec. 4, eq. 4) of the midrib and petiole, and the bend
 profile the leaf shader applies.
 
 For a chain of segments from a fixed joint, segment i makes the angle θ⁰_i with the load
@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.blade import blade_partials
-from leafview.core.params import Bending, LeafParams, Ripple, Transform
+from leafview.core.params import Bending, LeafParams, Ripple, Shape, Transform, Vec3
 
 __all__ = ["solve_bending", "residual", "bend_profile", "BendProfile", "BEND_SAMPLES", "rotation",
            "sample_clamped"]
@@ -138,8 +138,8 @@ def _blade_points(params: LeafParams, u: ArrayLike, v: ArrayLike) -> NDArray[np.
 
 
 @lru_cache(maxsize=64)
-def _bend_profile_cached(shape, bending, angles, scale) -> BendProfile:
-    params = LeafParams(shape=shape, bending=bending, transform=Transform(rotation=angles, scale=scale))
+def _bend_profile_cached(shape: Shape, bending: Bending, rotation_deg: Vec3, scale: float) -> BendProfile:
+    params = LeafParams(shape=shape, bending=bending, transform=Transform(rotation=rotation_deg, scale=scale))
 
     b = params.bending
     k = BEND_SAMPLES

@@ -1,4 +1,4 @@
-"""1D fractional Brownian motion by spectral synthesis (Geng, Hu & Zhang 2014 sec. 3, eqs 1-3).
+"""1D fractional Brownian motion by spectral synthesis (Geng, Hu & Zhang 2014, sec. 3, eqs 1-3).
 
 The spectrum of eq. 1, ``S_f = C · Nrand / f^(β/2)``, gets random phases (eq. 2) and is turned
 into a real periodic signal of ``n`` samples::

@@ -1,4 +1,4 @@
-"""The whole leaf surface in float64: the blade of eqs 1-6 (Chaurasia & Beardsley 2017) with
+"""The whole leaf surface in float64: the blade (Chaurasia & Beardsley 2017, eqs 1-6) with
 jitter, rippled margins (Geng, Hu & Zhang 2014, eq. 5) and the bent, twisted midrib (Geng, Hu &
 Zhang 2014, sec. 5.2.2), in that order. This is the numpy twin of ``shaders/leaf_eval.glsl``.
 
@@ -7,6 +7,8 @@ so that one import gives every evaluation function.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -49,6 +51,8 @@ __all__ = [
     "grid_indices",
 ]
 
+Arr = NDArray[np.float64]
+
 
 def partials(params: LeafParams, u: ArrayLike, v: ArrayLike, *, bend: BendProfile | None = None) -> Partials:
     """L, ∂L/∂u, ∂L/∂v and ∂²L/∂u∂v of the whole leaf: the blade (with jitter when enabled),
@@ -65,8 +69,9 @@ def partials(params: LeafParams, u: ArrayLike, v: ArrayLike, *, bend: BendProfil
     return Partials(L, Lu, Lv, Luv)
 
 
-def _add_ripple(params, s, sigma, vv, L, Lu, Lv, Luv):
-    """Rippled margin (Geng, Hu & Zhang 2014 eq. 5): each cross-section is a secondary vein, a cantilever from
+def _add_ripple(params: LeafParams, s: Arr, sigma: Arr, vv: Arr,
+                L: Arr, Lu: Arr, Lv: Arr, Luv: Arr) -> tuple[Arr, Arr, Arr, Arr]:
+    """Rippled margin (Geng, Hu & Zhang 2014, eq. 5): each cross-section is a secondary vein, a cantilever from
     the midrib under the turbulent load ``r = P [λ + (1 - λ) N(k · veins · v + θ)]``. In the
     small-deflection limit of eq. 4 a tip-loaded cantilever deflects as ``c(s) = s² (3 - s) / 2``
     (zero with zero slope at the midrib, 1 at the margin), so ``D = τ(v) r(v) c(|u|) ẑ``: out of
@@ -88,8 +93,9 @@ def _add_ripple(params, s, sigma, vv, L, Lu, Lv, Luv):
             Lv + (c * g)[:, None] * z, Luv + (sigma * dc * g)[:, None] * z)
 
 
-def _bend(bp, vv, A, dA, L, Lu, Lv, Luv):
-    """Apply the midrib bend and twist (Geng, Hu & Zhang 2014 sec. 5.2.2) to L and its partials.
+def _bend(bp: BendProfile, vv: Arr, A: Arr, dA: Arr,
+          L: Arr, Lu: Arr, Lv: Arr, Luv: Arr) -> tuple[Arr, Arr, Arr, Arr]:
+    """Apply the midrib bend and twist (Geng, Hu & Zhang 2014, sec. 5.2.2) to L and its partials.
 
     ``p' = A(v) + Δ(v) + R(v) (p - A(v))`` with ``R = R_N(Φ(v)) R_y(α v)``: the cross-section at
     v is twisted about the straight midrib's direction (y) through A(v), then turned with the
@@ -109,7 +115,7 @@ def _bend(bp, vv, A, dA, L, Lu, Lv, Luv):
             dA + ddelta + apply(dr, rel) + apply(r, Lv - dA), apply(dr, Lu) + apply(r, Luv))
 
 
-def _cross_matrix(a) -> NDArray[np.float64]:
+def _cross_matrix(a: Sequence[float] | NDArray[np.float64]) -> NDArray[np.float64]:
     x, y, z = a
     return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 

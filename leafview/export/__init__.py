@@ -37,6 +37,7 @@ from leafview.export.scene import (
     scene_from,
 )
 from leafview.export.usd import write_usd
+from leafview.gpu import LeafRenderer
 
 __all__ = [
     "BACKENDS",
@@ -131,7 +132,7 @@ def write(scene: ExportScene, path: str | Path, **options: Any) -> Path:
 
 
 def export_leaf(params: LeafParams, path: str | Path, *, resolution: Sequence[int] = DEFAULT_RESOLUTION,
-                backend: str = "gpu", length_m: float = DEFAULT_LENGTH_M, renderer: Any = None,
+                backend: str = "gpu", length_m: float = DEFAULT_LENGTH_M, renderer: LeafRenderer | None = None,
                 **options: Any) -> Path:
     """Bake ``params`` and write it to ``path`` (format from the suffix), placed by its transform.
 
@@ -145,7 +146,7 @@ def export_leaf(params: LeafParams, path: str | Path, *, resolution: Sequence[in
 
 
 def export_leaves(leaves: Sequence[LeafParams], path: str | Path, *, resolution: Sequence[int] = DEFAULT_RESOLUTION,
-                  backend: str = "gpu", length_m: float = DEFAULT_LENGTH_M, renderer: Any = None,
+                  backend: str = "gpu", length_m: float = DEFAULT_LENGTH_M, renderer: LeafRenderer | None = None,
                   progress: Callable[[int], None] | None = None, **options: Any) -> Path:
     """Several leaves, each at its own transform, into one file."""
     fmt = format_of(path)
@@ -156,7 +157,7 @@ def export_leaves(leaves: Sequence[LeafParams], path: str | Path, *, resolution:
 
 
 def export_scene(scene: SceneLike, path: str | Path, *, resolution: Sequence[int] = DEFAULT_RESOLUTION,
-                 backend: str = "gpu", length_m: float = DEFAULT_LENGTH_M, renderer: Any = None,
+                 backend: str = "gpu", length_m: float = DEFAULT_LENGTH_M, renderer: LeafRenderer | None = None,
                  progress: Callable[[int], None] | None = None, name: str | None = None,
                  **options: Any) -> Path:
     """Bake every distinct shape of ``scene`` once and write all leaves and stems to ``path``.

@@ -27,6 +27,7 @@ from __future__ import annotations
 import base64
 import json
 import struct
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -37,7 +38,7 @@ from leafview._version import __version__
 from leafview.atomic import atomic_output
 from leafview.errors import UsageError
 from leafview.export.mesh import LeafMesh, check_mesh
-from leafview.export.scene import BARK, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs
+from leafview.export.scene import BARK, TRS, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs
 
 __all__ = ["BACK_FACES", "INSTANCING_MODES", "Z_UP_TO_Y_UP", "gltf_document", "write_gltf"]
 
@@ -89,7 +90,7 @@ class _Builder:
         dtype = np.uint16 if n_vertices < 65535 else np.uint32
         return self.accessor(tris.astype(dtype).ravel(), target=_ELEMENTS)
 
-    def material(self, name: str, colour: Any, translucency: float, double_sided: bool,
+    def material(self, name: str, colour: Sequence[float], translucency: float, double_sided: bool,
                  extras: dict[str, Any]) -> int:
         key = (name, tuple(colour), translucency, double_sided)
         if key in self._materials:
@@ -124,7 +125,7 @@ def _leaf_materials(b: _Builder, part: ExportPart, back_faces: str) -> tuple[int
     return front, back
 
 
-def _hex(colour: Any) -> str:
+def _hex(colour: Sequence[float]) -> str:
     return "#" + "".join(f"{round(min(max(c, 0.0), 1.0) * 255):02x}" for c in colour)
 
 
@@ -168,7 +169,7 @@ def _trs_entry(t: NDArray[np.float64], q: NDArray[np.float64], s: NDArray[np.flo
     return entry
 
 
-def _place(b: _Builder, part: ExportPart, trs: tuple[NDArray[np.float64], ...], mesh_id: int,
+def _place(b: _Builder, part: ExportPart, trs: TRS, mesh_id: int,
            mats: tuple[int, int | None], instancing: str, threshold: int) -> list[int]:
     """Nodes (children of the root) that place every copy of ``part`` (``trs``: its matrices
     decomposed)."""

@@ -137,4 +137,7 @@ def contact_sheet(images: Sequence[NDArray[np.uint8]], labels: Sequence[str], *,
         if not oiio.ImageBufAlgo.render_text(sheet, x + tw // 2, y + th + int(font * 1.15), label,
                                              font, "DroidSans", [0.15, 0.17, 0.15, 1.0], "center"):
             raise _oiio_error("contact sheet label", sheet)
-    return sheet.get_pixels(oiio.UINT8)
+    pixels: NDArray[np.uint8] | None = sheet.get_pixels(oiio.UINT8)
+    if pixels is None:
+        raise _oiio_error("contact sheet pixels", sheet)
+    return pixels

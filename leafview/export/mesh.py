@@ -8,7 +8,7 @@ needed; the two agree to float32 rounding, see ``tests/test_gpu_eval.py``). Jitt
 bending are part of both.
 
 The pinched tips. Every curve of the model starts at the base (0, 0, 0) and ends at the apex
-(0, 1, 0) (Chaurasia & Beardsley 2017 sec. 3, eqs 3-4), so the grid rows v = 0 and v = 1 each collapse to one
+(0, 1, 0) (Chaurasia & Beardsley 2017, sec. 3, eqs 3-4), so the grid rows v = 0 and v = 1 each collapse to one
 point and half of the quads along them turn into triangles with two corners on that point. The
 renderer rasterises nothing for them; an exported file would carry them as degenerate triangles
 (validators flag them, some tools divide by their zero area). :func:`bake` drops exactly those
@@ -35,7 +35,7 @@ from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.params import LeafParams
 from leafview.deform.surface import grid_indices, grid_uv, tessellate
 from leafview.errors import NonFiniteMesh, UsageError
-from leafview.gpu import default_renderer
+from leafview.gpu import LeafRenderer, default_renderer
 
 __all__ = [
     "BACKENDS",
@@ -115,7 +115,7 @@ def pinch_triangles(nu: int, nv: int) -> NDArray[np.bool_]:
 
 
 @lru_cache(maxsize=16)
-def _topology(nu: int, nv: int) -> tuple[NDArray[np.int64], NDArray[np.uint32]]:
+def _topology(nu: int, nv: int) -> tuple[NDArray[np.uint32], NDArray[np.uint32]]:
     """(kept grid vertex ids, compacted triangles) for a grid without its pinch triangles
     (cached, read-only: every leaf of a grid shares them)."""
     tris = grid_indices(nu, nv)[~pinch_triangles(nu, nv)]
@@ -178,19 +178,19 @@ def check_mesh(mesh: LeafMesh) -> None:
 
 
 def bake(params: LeafParams, resolution: Sequence[int] = DEFAULT_RESOLUTION, *, backend: str = "gpu",
-         renderer: Any = None) -> LeafMesh:
+         renderer: LeafRenderer | None = None) -> LeafMesh:
     """Bake one leaf (leaf space; the world transform is left to the file's node).
 
     Parameters
     ----------
     params:
-        The leaf. ``params.transform`` matters only through the bend (Geng, Hu & Zhang 2014 eq. 4 loads the
+        The leaf. ``params.transform`` matters only through the bend (Geng, Hu & Zhang 2014, eq. 4 loads the
         blade along a world direction); the mesh itself is in leaf space.
     resolution:
         ``(nu, nv)`` grid samples across and along the blade (default 33×65, the renderer's).
     backend:
         ``"gpu"``: positions and normals read back from the rendering vertex shader;
-        ``"numpy"``: the float64 reference (eqs 1-6 of Chaurasia & Beardsley 2017, eqs 4-5 of Geng, Hu & Zhang 2014).
+        ``"numpy"``: the float64 reference (Chaurasia & Beardsley 2017, eqs 1-6; Geng, Hu & Zhang 2014, eqs 4-5).
     renderer:
         A :class:`~leafview.gpu.LeafRenderer` for ``"gpu"`` (default: the shared headless one).
     """
@@ -198,7 +198,7 @@ def bake(params: LeafParams, resolution: Sequence[int] = DEFAULT_RESOLUTION, *, 
 
 
 def bake_many(leaves: Iterable[LeafParams], resolution: Sequence[int] = DEFAULT_RESOLUTION, *,
-              backend: str = "gpu", renderer: Any = None,
+              backend: str = "gpu", renderer: LeafRenderer | None = None,
               progress: Callable[[int], None] | None = None) -> list[LeafMesh]:
     """Bake several leaves on one grid; ``progress(n)`` is called after each leaf."""
     nu, nv = check_resolution(resolution)
@@ -211,7 +211,9 @@ def bake_many(leaves: Iterable[LeafParams], resolution: Sequence[int] = DEFAULT_
         renderer = default_renderer()
     out = []
     for params in leaves:
-        if backend == "gpu":
+        pos: NDArray[np.floating]
+        nrm: NDArray[np.floating]
+        if renderer is not None and backend == "gpu":   # "gpu" always has a renderer by now
             pos, nrm = renderer.capture(params, uv32[:, 0], uv32[:, 1])
         else:
             ref = tessellate(params, nu, nv)  # the same grid_uv order, float64

@@ -61,9 +61,9 @@ def world_triangles(scene: ExportScene, up: str = "y") -> Iterator[tuple[str, ND
             name = part.name if len(part.matrices) == 1 else f"{part.name}.{k}"
             yield name, pos, nrm, part.mesh.st, tris
     if scene.stems is not None:
-        pos, nrm, idx = scene.stems
-        yield ("stems", (pos.astype(np.float64) @ axes.T) * scale, nrm.astype(np.float64) @ axes.T,
-               np.zeros((len(pos), 2), np.float32), idx)
+        stem_pos, stem_nrm, stem_idx = scene.stems
+        yield ("stems", (stem_pos.astype(np.float64) @ axes.T) * scale, stem_nrm.astype(np.float64) @ axes.T,
+               np.zeros((len(stem_pos), 2), np.float32), stem_idx)
 
 
 def _check_finite(name: str, pos: NDArray[np.float64]) -> None:
@@ -101,7 +101,8 @@ def write_ply(scene: ExportScene, path: str | Path, *, up: str = "y") -> Path:
     chunks = list(world_triangles(scene, up))
     for name, pos, *_ in chunks:
         _check_finite(name, pos)
-    vert = np.zeros(sum(len(c[1]) for c in chunks), dtype=[(k, "<f4") for k in ("x", "y", "z", "nx", "ny", "nz", "s", "t")])
+    columns = ("x", "y", "z", "nx", "ny", "nz", "s", "t")
+    vert = np.zeros(sum(len(c[1]) for c in chunks), dtype=[(k, "<f4") for k in columns])
     faces = []
     base = 0
     for _, pos, nrm, st, tris in chunks:
@@ -120,7 +121,7 @@ def write_ply(scene: ExportScene, path: str | Path, *, up: str = "y") -> Path:
     face["i"] = tris
     header = (f"ply\nformat binary_little_endian 1.0\ncomment leafview {__version__}: metres, +{up} up\n"
               f"element vertex {len(vert)}\n"
-              + "".join(f"property float {k}\n" for k in vert.dtype.names)
+              + "".join(f"property float {k}\n" for k in columns)
               + f"element face {len(face)}\nproperty list uchar uint vertex_indices\nend_header\n")
     with atomic_output(path) as tmp, open(tmp, "wb") as fh:
         fh.write(header.encode("ascii"))

@@ -20,14 +20,16 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.params import LeafParams, Material
 from leafview.errors import UsageError
 from leafview.export.mesh import DEFAULT_RESOLUTION, LeafMesh, bake_many
+from leafview.gpu import LeafRenderer
 
 __all__ = [
     "BARK",
+    "TRS",
     "TRS_TOLERANCE",
     "ExportPart",
     "ExportScene",
@@ -59,9 +61,15 @@ class SceneLike(Protocol):
     uint32) in world space; ``len(scene)`` = N.
     """
 
-    shape_ids: Any
-    matrices: Any
-    stems: Any
+    # read-only members: Scene derives shape_ids, and a reader needs no setters
+    @property
+    def shape_ids(self) -> ArrayLike: ...
+
+    @property
+    def matrices(self) -> ArrayLike: ...
+
+    @property
+    def stems(self) -> tuple[ArrayLike, ArrayLike, ArrayLike] | None: ...
 
     def shapes(self) -> list[LeafParams]: ...
 
@@ -139,15 +147,18 @@ def compose_trs(t: NDArray[np.floating], q: NDArray[np.floating], s: NDArray[np.
     return m
 
 
-def decompose_trs(m: NDArray[np.floating]) -> tuple[NDArray[np.float64], ...]:
+TRS = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+
+
+def decompose_trs(m: NDArray[np.floating]) -> TRS:
     """Split matrices (..., 4, 4) into ``M ≈ T · R · S`` (S diagonal, may be negative for mirrors).
 
     Returns ``(t (..., 3), q (..., 4) as x, y, z, w, s (..., 3), error (...))`` where ``error``
     is ``max |T R S - M| / max(1, max |M|)``: zero up to rounding for a true TRS matrix, large
     for shear or a projective bottom row.
     """
-    m = np.asarray(m, dtype=np.float64)
-    a = m[..., :3, :3]
+    m64 = np.asarray(m, dtype=np.float64)
+    a = m64[..., :3, :3]
     s = np.linalg.norm(a, axis=-2)                       # column lengths
     det = np.linalg.det(a)
     s = np.where((det < 0.0)[..., None], -s, s)          # mirror: all three negative, R proper
@@ -157,21 +168,22 @@ def decompose_trs(m: NDArray[np.floating]) -> tuple[NDArray[np.float64], ...]:
     u, _, vt = np.linalg.svd(r)
     rot = u @ vt
     q = quat_from_matrix(rot)
-    t = m[..., :3, 3].copy()
+    t = m64[..., :3, 3].copy()
     back = compose_trs(t, q, s)
-    scale = np.maximum(1.0, np.abs(m).max(axis=(-2, -1)))
-    err = np.abs(back - m).max(axis=(-2, -1)) / scale
+    scale = np.maximum(1.0, np.abs(m64).max(axis=(-2, -1)))
+    err = np.abs(back - m64).max(axis=(-2, -1)) / scale
     err = np.where(np.abs(s).min(axis=-1) > 0.0, err, np.inf)   # a zero scale cannot be inverted
     return t, q, s, err
 
 
-def parts_trs(parts: Sequence[ExportPart]) -> list[tuple[NDArray[np.float64], ...]]:
+def parts_trs(parts: Sequence[ExportPart]) -> list[TRS]:
     """:func:`decompose_trs` of every part's matrices, computed in one batch (thousands of
     single-leaf parts would otherwise pay numpy's per-call overhead each)."""
     if not parts:
         return []
     t, q, s, err = decompose_trs(np.concatenate([p.matrices for p in parts]))
-    out, at = [], 0
+    out: list[TRS] = []
+    at = 0
     for p in parts:
         k = len(p.matrices)
         out.append((t[at:at + k], q[at:at + k], s[at:at + k], err[at:at + k]))
@@ -188,7 +200,7 @@ def leaf_scene(params: LeafParams, mesh: LeafMesh, *, length_m: float = 0.1) -> 
 
 
 def leaves_scene(leaves: Sequence[LeafParams], resolution: Sequence[int] = DEFAULT_RESOLUTION, *,
-                 backend: str = "gpu", renderer: Any = None, length_m: float = 0.1,
+                 backend: str = "gpu", renderer: LeafRenderer | None = None, length_m: float = 0.1,
                  progress: Callable[[int], None] | None = None, name: str = "leaves") -> ExportScene:
     """Several leaves, each at its own transform, each its own mesh."""
     meshes = bake_many(leaves, resolution, backend=backend, renderer=renderer, progress=progress)
@@ -216,12 +228,12 @@ def _check_stems(stems: Any) -> Stems | None:
     if len(idx) == 0:
         return None
     lens = np.linalg.norm(nrm, axis=1, keepdims=True)
-    nrm = np.where(lens > 0, nrm / np.where(lens > 0, lens, 1), np.float32([0, 0, 1])).astype(np.float32)
+    nrm = np.where(lens > 0, nrm / np.where(lens > 0, lens, 1), np.array([0, 0, 1], np.float32)).astype(np.float32)
     return pos, nrm, idx.astype(np.uint32)
 
 
 def scene_from(scene: SceneLike, resolution: Sequence[int] = DEFAULT_RESOLUTION, *, backend: str = "gpu",
-               renderer: Any = None, length_m: float = 0.1,
+               renderer: LeafRenderer | None = None, length_m: float = 0.1,
                progress: Callable[[int], None] | None = None, name: str = "scene") -> ExportScene:
     """Bake every distinct shape of ``scene`` once and group the leaves by shape.
 

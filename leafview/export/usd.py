@@ -28,6 +28,7 @@ scales; a copy whose matrix is not TRS (shear) becomes its own Xform with the fu
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -39,7 +40,7 @@ from leafview.atomic import atomic_output
 from leafview.errors import UsageError
 from leafview.export.gltf import BACK_FACES
 from leafview.export.mesh import LeafMesh, check_mesh
-from leafview.export.scene import BARK, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs
+from leafview.export.scene import BARK, TRS, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs
 
 __all__ = ["usd_layer", "write_usd"]
 
@@ -106,7 +107,7 @@ class _Writer:
         spec.targetPathList.explicitItems = [self.Sdf.Path(t) for t in targets]
 
     # -- content ----------------------------------------------------------------------------
-    def material(self, name: str, colour: Any, translucency: float, extra: dict[str, Any]) -> str:
+    def material(self, name: str, colour: Sequence[float], translucency: float, extra: dict[str, Any]) -> str:
         key = (tuple(colour), translucency, tuple(sorted((k, tuple(v) if isinstance(v, (list, tuple)) else v)
                                                       for k, v in extra.items())))
         if key in self.materials:
@@ -177,7 +178,7 @@ class _Writer:
         if back is not None:
             self.mesh(f"{path}/back", mesh.positions, mesh.normals, mesh.indices, mesh.st, back, back=True)
 
-    def instancer(self, path: str, parts: list[tuple[ExportPart, tuple[str, str | None], tuple[Any, ...]]]) -> None:
+    def instancer(self, path: str, parts: list[tuple[ExportPart, tuple[str, str | None], TRS]]) -> None:
         """One PointInstancer for the TRS copies of ``parts`` (each with its decomposed matrices)."""
         Vt, T = self.Vt, self.T
         inst = self.prim(path, "PointInstancer")

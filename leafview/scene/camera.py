@@ -57,7 +57,7 @@ def frame_view(view: str, points: NDArray[np.float64], size: tuple[int, int]) ->
     return _orbit(points, lo, hi, w, h, az, el)
 
 
-def _top(lo, hi, w, h) -> Camera:
+def _top(lo: NDArray[np.float64], hi: NDArray[np.float64], w: int, h: int) -> Camera:
     extent = np.maximum(hi[:2] - lo[:2], 1e-9)
     scale = TOP_FILL * min(w / extent[0], h / extent[1])  # pixels per world unit
     cx, cy = (lo[:2] + hi[:2]) / 2
@@ -71,7 +71,8 @@ def _top(lo, hi, w, h) -> Camera:
     return Camera(view, proj, np.array([0.0, 0.0, -1.0, 0.0]), False)
 
 
-def _orbit(points, lo, hi, w, h, az_deg, el_deg) -> Camera:
+def _orbit(points: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64], w: int, h: int,
+           az_deg: float, el_deg: float) -> Camera:
     """Perspective camera on the orbit (azimuth, elevation) around the leaf, as close as it can
     be with every vertex inside the central ``ORBIT_FILL`` of the image (tighter than a bounding
     sphere for long, narrow leaves), aimed at the middle of the projected extent."""

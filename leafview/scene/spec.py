@@ -8,12 +8,12 @@ self-contained) with weights, and how much leaves vary within a species.
 :func:`build_scene` expands it deterministically into a :class:`Scene`: per-leaf arrays that the
 GPU path packs into one storage-buffer row per leaf.
 
-Variation within a species (Garg & Leow 2011 sec. 4 uses up to ±20 %): every leaf gets its own factors
+Variation within a species (Garg & Leow 2011, sec. 4 uses up to ±20 %): every leaf gets its own factors
 ``f ∈ [1 - variation, 1 + variation]``, one per Ω component (:data:`VARIED`), multiplying the
 species' value; ``v̄`` positions stay inside (0, 1). The leaf colour is multiplied by
 ``1 ± colour_variation`` (one factor per leaf). Each plant takes one species, drawn by weight.
 
-Bending in scenes: the cantilever solve (Geng, Hu & Zhang 2014 eq. 4) runs once per species, in the species'
+Bending in scenes: the cantilever solve (Geng, Hu & Zhang 2014, eq. 4) runs once per species, in the species'
 own rest frame, and every leaf of that species carries that droop (a per-leaf solve costs about a
 millisecond, too much for 10⁶ leaves). A leaf whose shape factors differ from 1 therefore droops
 like its species, not exactly as its own solve would give; :func:`bend_deviation` measures it.
@@ -24,22 +24,23 @@ from __future__ import annotations
 import json
 import math
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import tomli_w
 from numpy.typing import NDArray
 
 from leafview.atomic import atomic_output
 from leafview.core.compact import compact_dict, parse_compact
 from leafview.core.io import read_document
-from leafview.core.params import Bending, LeafParams, ParamError, Shape, Transform, parse_params
+from leafview.core.params import Bending, LeafParams, ParamError, Shape, Transform, Vec3, parse_params
 from leafview.deform.beam import bend_profile
 from leafview.deform.surface import evaluate, grid_uv, partials
 from leafview.resources import resolve_preset
-from leafview.scene.plants import PlantSpec, scatter
+from leafview.scene.plants import Placement, PlantSpec, scatter
 
 __all__ = ["SceneSpec", "Scene", "build_scene", "load_scene", "save_scene", "scene_from_leaves", "LAYOUTS", "VARIED",
            "MAX_LEAVES", "vary_shape", "evaluate_leaf", "bend_deviation"]
@@ -98,15 +99,17 @@ class SceneSpec:
             raise ParamError("scene.stems", f"must be true or false, got {self.stems!r}")
         self.plant_spec()  # validates [plant]
 
-    def plant_spec(self) -> Any:
+    def plant_spec(self) -> PlantSpec:
         """The :class:`~leafview.scene.plants.PlantSpec` of ``[plant]`` (validated)."""
 
         known = {f.name for f in fields(PlantSpec)}
         for key in self.plant:
             if key not in known:
                 raise ParamError(f"plant.{key}", f"unknown setting (known: {', '.join(sorted(known))})")
+        # values come from a file: PlantSpec validates each one
+        settings: dict[str, Any] = {k: (tuple(v) if isinstance(v, list) else v) for k, v in self.plant.items()}
         try:
-            return PlantSpec(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in self.plant.items()})
+            return PlantSpec(**settings)
         except ParamError as exc:
             path = exc.path if exc.path.startswith("plant") else f"plant.{exc.path}".rstrip(".")
             raise ParamError(path, exc.message) from None
@@ -234,7 +237,6 @@ def load_scene(path: str | os.PathLike[str]) -> SceneSpec:
 
 def save_scene(spec: SceneSpec, path: str | os.PathLike[str]) -> None:
     """Write ``spec`` atomically as TOML or JSON (self-contained: species inline)."""
-    import tomli_w
 
 
     p = Path(path)
@@ -252,17 +254,23 @@ def vary_shape(shape: Shape, factors: NDArray[np.floating]) -> Shape:
     to [0.02, 0.98]. The vectorised twin for GPU records is
     :func:`leafview.gpu.scene.pack_scene` (a test checks they agree)."""
     f = np.asarray(factors, np.float64)
-    a1 = tuple(float(x) for x in np.asarray(shape.a1) * f[0:3])
-    a2 = tuple(float(x) for x in np.asarray(shape.a2) * f[3:6])
-    rows = []
+    a1 = _vec3(np.asarray(shape.a1) * f[0:3])
+    a2 = _vec3(np.asarray(shape.a2) * f[3:6])
+    rows: list[Vec3] = []
     for k, (vb, xs, zs) in enumerate(shape.silhouette[:3]):
         g = f[6 + 3 * k: 9 + 3 * k]
         rows.append((float(np.clip(vb * g[0], 0.02, 0.98)), float(xs * g[1]), float(zs * g[2])))
-    rows += [tuple(r) for r in shape.silhouette[3:]]
+    rows += [(r[0], r[1], r[2]) for r in shape.silhouette[3:]]
     # rows beyond the paper's three (an extended silhouette) keep their species' values
     zf = tuple(float(x) for x in np.asarray(shape.zf[:3]) * f[15:18]) + tuple(shape.zf[3:])
     zg = tuple(float(x) for x in np.asarray(shape.zg[:3]) * f[18:21]) + tuple(shape.zg[3:])
     return replace(shape, a1=a1, a2=a2, silhouette=tuple(rows), zf=zf, zg=zg)
+
+
+def _vec3(values: NDArray[np.float64]) -> Vec3:
+    """Three numbers as a tuple of Python floats."""
+    x, y, z = (float(c) for c in values)
+    return x, y, z
 
 
 @dataclass
@@ -289,7 +297,7 @@ class Scene:
     tint: NDArray[np.float32]
     matrices: NDArray[np.float64]
     stems: tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.uint32]] | None
-    placement: Any
+    placement: Placement | None
 
     def __len__(self) -> int:
         return int(self.species_id.shape[0])
@@ -317,8 +325,7 @@ class Scene:
         sp = self.species[int(self.species_id[i])]
         t = float(self.tint[i])
         mat = sp.material
-        mat = replace(mat, front=tuple(float(min(max(c * t, 0.0), 1.0)) for c in mat.front),
-                      back=tuple(float(min(max(c * t, 0.0), 1.0)) for c in mat.back))
+        mat = replace(mat, front=_tinted(mat.front, t), back=_tinted(mat.back, t))
         return sp.replace(shape=vary_shape(sp.shape, self.factors[i]), material=mat,
                           name=f"{sp.name or 'leaf'}_{i}")
 
@@ -327,7 +334,7 @@ class Scene:
         no name (what a leaf set, :mod:`leafview.core.compact`, stores per leaf)."""
         return self.leaf(i).replace(transform=Transform.from_matrix(self.matrices[i]), name="")
 
-    def placed_leaves(self, progress: Any = None) -> list[LeafParams]:
+    def placed_leaves(self, progress: Callable[[int], object] | None = None) -> list[LeafParams]:
         """Every :meth:`placed_leaf`, in order (``progress(1)`` after each, e.g. a tqdm update)."""
         out = []
         for i in range(len(self)):
@@ -342,6 +349,12 @@ class Scene:
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         size = float(np.linalg.norm(self.matrices[:, :3, 0], axis=1).max(initial=0.0))
         return lo - size, hi + size
+
+
+def _tinted(colour: Vec3, t: float) -> Vec3:
+    """``colour`` times the tint factor ``t``, clamped to [0, 1]."""
+    r, g, b = (float(min(max(c * t, 0.0), 1.0)) for c in colour)
+    return r, g, b
 
 
 def build_scene(spec: SceneSpec) -> Scene:

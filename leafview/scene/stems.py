@@ -2,7 +2,7 @@
 woody skeleton of many plants, and the nodes on it where leaves sit (phyllotaxis).
 
 Every woody axis of a plant (trunk, branch, twig) and every petiole is a *generalized cylinder*
-(Bloomenthal's branches, as recalled in Mündermann et al. 2003 sec. 2 and used for veins in Hong 2005 ch. 6.1):
+(Bloomenthal's branches, as recalled in Mündermann et al. 2003, sec. 2 and used for veins in Hong 2005, ch. 6.1):
 a circle swept along a spine (the carrier curve) with a radius that tapers along it. All the
 functions here work on many axes at once (arrays with a leading axis dimension), so a plant
 generator loops over levels of the branching hierarchy in Python, never over axes or leaves.
@@ -22,23 +22,74 @@ drift along a curved axis, which is what keeps phyllotactic divergence angles ex
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, fields
-from typing import Any
+from typing import Protocol
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["grow_spines", "soft_floor", "segment_tangents", "vertex_tangents", "transport_frames",
            "reference_normals", "sweep_tubes", "cross", "merge_meshes", "Mesh3", "Axes", "Skeleton",
            "grow_skeleton", "GOLDEN_ANGLE", "divergence", "auto_twigs", "Nodes", "place_nodes",
-           "MAX_TWIGS", "split_counts"]
+           "MAX_TWIGS", "split_counts", "PlantArchitecture"]
 
 GOLDEN_ANGLE = 360.0 * (1.0 - 2.0 / (1.0 + math.sqrt(5.0)))     # 137.5077...°
 
 F64 = NDArray[np.float64]
+AlongOf = Callable[[NDArray[np.int64], F64], F64]   # (axis, arc parameter) -> position along the leafy part
 Mesh3 = tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.uint32]]
 _EPS = 1e-12
 _Z_UP = np.array([0.0, 0.0, 1.0])
+
+
+class PlantArchitecture(Protocol):
+    """What the skeleton and the nodes read of a plant's architecture: the fields of
+    :class:`leafview.scene.plants.PlantSpec` (which imports this module, so it is named here by
+    shape; read-only, as that frozen dataclass's fields are)."""
+
+    @property
+    def phyllotaxis(self) -> str: ...
+    @property
+    def whorl(self) -> int: ...
+    @property
+    def per_node(self) -> int: ...
+    @property
+    def height(self) -> float: ...
+    @property
+    def branches(self) -> int: ...
+    @property
+    def branch_angle(self) -> float: ...
+    @property
+    def branch_length(self) -> float: ...
+    @property
+    def crown_base(self) -> float: ...
+    @property
+    def twigs(self) -> int: ...
+    @property
+    def twig_angle(self) -> float: ...
+    @property
+    def twig_length(self) -> float: ...
+    @property
+    def internode(self) -> float: ...
+    @property
+    def gravitropism(self) -> float: ...
+    @property
+    def lean(self) -> float: ...
+    @property
+    def radius(self) -> float: ...
+    @property
+    def taper(self) -> float: ...
+    @property
+    def variation(self) -> float: ...
+    @property
+    def leaf_size(self) -> float: ...
+    @property
+    def size_falloff(self) -> float: ...
+    @property
+    def petiole(self) -> float: ...
+    @property
+    def petiole_angle(self) -> float: ...
 
 
 def _normalize(v: F64) -> F64:
@@ -243,7 +294,7 @@ class Axes:
         return p, r, self.tangent[axis, k], self.normal[axis, k], self.binormal[axis, k]
 
 
-def _axes(spines: F64, radii: F64, length: F64, plant, parent, attach) -> Axes:
+def _axes(spines: F64, radii: F64, length: F64, plant: ArrayLike, parent: ArrayLike, attach: ArrayLike) -> Axes:
     t = segment_tangents(spines)
     n, b = transport_frames(t, reference_normals(t[:, 0]))
     return Axes(spines, radii, t, n, b, np.asarray(length, np.float64), np.asarray(plant, np.int64),
@@ -273,7 +324,7 @@ def branch_envelope(frac: F64) -> F64:
     return 0.25 + 0.75 * np.clip(1.0 - frac, 0.0, 1.0) ** 0.6
 
 
-def grow_skeleton(spec: Any, scales: F64, twigs: int, rng: np.random.Generator) -> Skeleton:
+def grow_skeleton(spec: PlantArchitecture, scales: F64, twigs: int, rng: np.random.Generator) -> Skeleton:
     """Grow the woody axes of ``len(scales)`` plants of architecture ``spec`` (a
     :class:`~leafview.scene.plants.PlantSpec`) at the origin, ``twigs`` twigs per branch.
 
@@ -345,7 +396,7 @@ MAX_TWIGS = 48
 S0_TRUNK, S0_BRANCH, S0_TWIG = 0.0, 0.35, 0.1     # where the leafy part of an axis starts
 
 
-def divergence(spec: Any) -> float:
+def divergence(spec: PlantArchitecture) -> float:
     """Angle (degrees) between successive nodes: 137.508 (golden), 180 (alternate), 90
     (opposite, decussate) or 180 / whorl (whorled: each whorl sits between the last one's leaves)."""
     return {"golden": GOLDEN_ANGLE, "alternate": 180.0, "opposite": 90.0,
@@ -368,7 +419,7 @@ def split_counts(total: NDArray[np.int64], weights: NDArray[np.float64]) -> NDAr
     return base + (rank < short[:, None])
 
 
-def auto_twigs(spec: Any, leaves_per_plant: float) -> int:
+def auto_twigs(spec: PlantArchitecture, leaves_per_plant: float) -> int:
     """Twigs per branch: ``spec.twigs``, or for ``twigs = -1`` the fewest that give the leaves
     room at about ``internode × leaf size`` between nodes (at most :data:`MAX_TWIGS`)."""
     if spec.branches == 0:
@@ -395,8 +446,8 @@ class Nodes:
     normal: NDArray[np.float64]     # the axis frame's normal (fallback for the blade direction)
 
 
-def nodes_on(axes: Axes, counts: NDArray[np.int64], s0: float, spec: Any,
-               rng: np.random.Generator, along_of) -> Nodes:
+def nodes_on(axes: Axes, counts: NDArray[np.int64], s0: float, spec: PlantArchitecture,
+             rng: np.random.Generator, along_of: AlongOf) -> Nodes:
     """Place ``counts[a]`` leaves on axis ``a`` node by node (phyllotaxis of ``spec``), base
     to tip over the arc parameters ``[s0, 1]``."""
     k = spec.per_node
@@ -415,7 +466,7 @@ def nodes_on(axes: Axes, counts: NDArray[np.int64], s0: float, spec: Any,
     return Nodes(axes.plant[axis], p, out, r, along_of(axis, s), n)
 
 
-def place_nodes(spec: Any, sk: Skeleton, counts: NDArray[np.int64], rng: np.random.Generator) -> Nodes:
+def place_nodes(spec: PlantArchitecture, sk: Skeleton, counts: NDArray[np.int64], rng: np.random.Generator) -> Nodes:
     """Split each plant's leaves over its leafy axes by leafy length and place them."""
     p_n = len(counts)
     if sk.branches is None:
