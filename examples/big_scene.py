@@ -15,8 +15,9 @@ from pathlib import Path
 
 import leafview
 from leafview.export.images import write_image
-from leafview.gpu.scene import CullSettings, SceneRenderer, scene_camera
+from leafview.gpu.scene import CullSettings, SceneRenderer
 from leafview.resources import resolve_preset
+from leafview.scene.camera import scene_camera
 from leafview.scene.spec import SceneSpec, build_scene
 
 

@@ -34,9 +34,10 @@ from leafview.gpu.layout import (
 )
 from leafview.gpu.renderer import LeafRenderer
 from leafview.gpu.resources import GpuResources
-from leafview.gpu.scene import SceneRenderer, scene_camera
+from leafview.gpu.scene import SceneRenderer
 from leafview.gpu.shaders import build_compute, preprocess
 from leafview.resources import shader_dir
+from leafview.scene.camera import scene_camera
 from leafview.scene.spec import SceneSpec, build_scene
 from leafview.shapes import shapes_params
 

@@ -179,7 +179,8 @@ def test_bounding_spheres_hold_every_vertex(drawn, small):
 
 @pytest.mark.parametrize("view", ["ground", "three-quarter", "top"])
 def test_gpu_culling_and_lod_equal_numpy(ctx, drawn, small, view):
-    from leafview.gpu.scene import CullSettings, cull_reference, scene_camera
+    from leafview.gpu.scene import CullSettings, cull_reference
+    from leafview.scene.camera import scene_camera
 
     size = (640, 360)
     cam = scene_camera(small, size, view)
@@ -197,7 +198,8 @@ def test_gpu_culling_and_lod_equal_numpy(ctx, drawn, small, view):
 
 
 def test_lod_picks_coarser_grids_further_away(ctx, drawn, small):
-    from leafview.gpu.scene import CullSettings, scene_camera
+    from leafview.gpu.scene import CullSettings
+    from leafview.scene.camera import scene_camera
 
     size = (640, 360)
     cam = scene_camera(small, size, "ground")
@@ -219,7 +221,8 @@ def test_lod_switch_moves_the_outline_by_at_most_a_pixel(ctx):
 
 
 def test_same_seed_same_image_and_batches_do_not_change_it(ctx, presets):
-    from leafview.gpu.scene import SceneRenderer, scene_camera
+    from leafview.gpu.scene import SceneRenderer
+    from leafview.scene.camera import scene_camera
 
     scene = build_scene(_spec(presets, n=600, seed=9))
     cam = scene_camera(scene, (128, 96), "three-quarter")
@@ -234,7 +237,8 @@ def test_same_seed_same_image_and_batches_do_not_change_it(ctx, presets):
 
 
 def test_reference_image_of_a_small_scene(ctx, presets, request):
-    from leafview.gpu.scene import SceneRenderer, scene_camera
+    from leafview.gpu.scene import SceneRenderer
+    from leafview.scene.camera import scene_camera
 
     spec = SceneSpec(species=(presets["ovate"], presets["lanceolate"]), layout="plant", leaves=300, seed=2)
     scene = build_scene(spec)

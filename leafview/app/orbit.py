@@ -11,16 +11,14 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import pyrr
 from numpy.typing import ArrayLike, NDArray
 
-from leafview.scene.camera import Camera
+from leafview.scene.camera import FOV_DEG, Camera, look_at
 
 __all__ = ["OrbitCamera", "project", "HOME_AZIMUTH", "HOME_ELEVATION"]
 
 HOME_AZIMUTH = 35.0    # the three-quarter view of ``leafview render --view three-quarter``
 HOME_ELEVATION = 50.0
-FOV_DEG = 30.0
 ORBIT_DEG_PER_PX = 0.4
 DOLLY_PER_STEP = 0.88
 
@@ -54,13 +52,9 @@ class OrbitCamera:
     def camera(self, width: int, height: int) -> Camera:
         """The :class:`~leafview.scene.camera.Camera` for a viewport of ``width`` × ``height`` pixels."""
         aspect = max(width, 1) / max(height, 1)
-        eye = self.eye()
-        view = pyrr.matrix44.create_look_at(eye, self.target, np.array([0.0, 0.0, 1.0]),
-                                            dtype=np.float64).T
         near = max(self.distance - 4.0 * self.radius, self.distance * 0.01, 1e-4)
         far = self.distance + 12.0 * self.radius
-        proj = pyrr.matrix44.create_perspective_projection(FOV_DEG, aspect, near, far, dtype=np.float64).T
-        return Camera(view, proj, np.array([*eye, 1.0]), True)
+        return look_at(self.eye(), self.target, aspect, near, far)
 
     # -- interaction ----------------------------------------------------------------------------
     def orbit(self, dx: float, dy: float) -> None:

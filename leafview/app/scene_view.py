@@ -26,6 +26,7 @@ from leafview.app.orbit import OrbitCamera
 from leafview.app.viewer import begin_io
 from leafview.app.window import ViewerWindow
 from leafview.gpu.scene import CullSettings, SceneRenderer
+from leafview.gpu.targets import RenderTarget, read_rgba
 from leafview.scene.spec import Scene
 
 __all__ = ["SceneView", "view_scene"]
@@ -85,8 +86,7 @@ class SceneView:
         self.fps = 0.0
         self._dts: deque[float] = deque(maxlen=30)
         self._drag: str | None = None
-        self._targets: list[Any] = []
-        self._size: tuple[int, int] | None = None
+        self._render_target: RenderTarget | None = None
         self.counts = np.zeros(len(self.renderer.grids), np.int64)
 
     def _corners(self) -> NDArray[np.float64]:
@@ -187,27 +187,21 @@ class SceneView:
 
     # -- framebuffers -------------------------------------------------------------------------------
     def _target(self, w: int, h: int) -> moderngl.Framebuffer:
-        if self._size != (w, h):
+        if self._render_target is None or self._render_target.size != (w, h):
             self._release_targets()
-            color = self.ctx.renderbuffer((w, h), 4)
-            depth = self.ctx.depth_renderbuffer((w, h))
-            self._targets = [self.ctx.framebuffer([color], depth), color, depth]
-            self._size = (w, h)
-        return self._targets[0]
+            self._render_target = RenderTarget(self.ctx, (w, h))
+        return self._render_target.fbo
 
     def _release_targets(self) -> None:
-        if self._targets:
-            self.ctx.detect_framebuffer(0).use()
-            for obj in self._targets:
-                obj.release()
-        self._targets, self._size = [], None
+        if self._render_target is not None:
+            self._render_target.release()
+            self._render_target = None
 
     def read_frame(self) -> NDArray[np.uint8]:
         """The last frame as (h, w, 4) uint8, row 0 at the top, opaque."""
-        if self._size is None:
+        if self._render_target is None:
             raise RuntimeError("no frame has been drawn yet")
-        w, h = self._size
-        img = np.frombuffer(self._targets[0].read(components=4, alignment=1), np.uint8).reshape(h, w, 4)[::-1].copy()
+        img = read_rgba(self._render_target.resolved)
         img[..., 3] = 255
         return img
 

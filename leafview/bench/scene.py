@@ -27,8 +27,9 @@ from leafview.bench.timing import Progress, bench_context, gl_info, median_time
 from leafview.core.params import LeafParams
 from leafview.gpu.context import check_error
 from leafview.gpu.instanced import OffscreenTarget
-from leafview.gpu.scene import CullSettings, SceneRenderer, lod_switch_error, scene_camera
+from leafview.gpu.scene import CullSettings, SceneRenderer, lod_switch_error
 from leafview.resources import resolve_preset
+from leafview.scene.camera import scene_camera
 from leafview.scene.spec import SceneSpec, build_scene
 
 __all__ = ["run", "format_table", "GOALS"]

@@ -47,7 +47,7 @@ from leafview.gpu.context import check_error
 from leafview.gpu.instanced import InstancedLeaves, OffscreenTarget
 from leafview.gpu.layout import LEAF_BLOCK, pack_leaves
 from leafview.gpu.renderer import LeafRenderer
-from leafview.scene.camera import Camera
+from leafview.scene.camera import top_down
 
 __all__ = ["run", "format_table"]
 
@@ -75,9 +75,7 @@ def _scatter(leaves: list[Any], count: int, seed: int = 0) -> list[Any]:
 
 def _frame_time(ctx: moderngl.Context, leaves: list[Any], repeats: int) -> tuple[float, float]:
     """(median frame seconds, upload seconds) drawing ``leaves`` in one instanced draw."""
-    view = np.eye(4)
-    proj = np.diag([1.0, 1.0, -0.1, 1.0])
-    cam = Camera(view=view, proj=proj, eye=np.array([0.0, 0.0, -1.0, 0.0]), perspective=False)
+    cam = top_down((0.0, 0.0), 10.0, 1.0, 1.0, 20.0)   # the [-1, 1]² square the leaves lie in, z ∈ [-10, 10]
     records, tables = pack_leaves(leaves)
     with OffscreenTarget(ctx, SIZE) as target:
         target.use()

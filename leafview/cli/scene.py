@@ -24,8 +24,9 @@ from leafview.errors import UsageError
 from leafview.export import export_scene
 from leafview.export.images import format_of, write_image
 from leafview.gpu import default_renderer
-from leafview.gpu.scene import LOD_GRIDS, SCENE_VIEWS, CullSettings, SceneRenderer, scene_camera
+from leafview.gpu.scene import LOD_GRIDS, CullSettings, SceneRenderer
 from leafview.resources import builtin_presets, resolve_preset
+from leafview.scene.camera import SCENE_VIEWS, scene_camera
 from leafview.scene.spec import (
     LAYOUTS,
     MAX_LEAVES,

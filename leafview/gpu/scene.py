@@ -26,7 +26,6 @@ from typing import Any
 
 import moderngl
 import numpy as np
-import pyrr
 from numpy.typing import NDArray
 from scipy.ndimage import distance_transform_edt
 
@@ -52,16 +51,15 @@ from leafview.gpu.layout import (
 from leafview.gpu.owner import GLObjects
 from leafview.gpu.resources import GpuResources, JitterTable
 from leafview.resources import resolve_preset
-from leafview.scene.camera import Camera, frame_view
+from leafview.scene.camera import Camera, top_down
 from leafview.scene.spec import Scene, SceneSpec
 
 __all__ = ["LOD_GRIDS", "CullSettings", "SceneRenderer", "SceneLimitError", "pack_scene", "species_cull", "plan_batches",
-           "frustum_planes", "cull_reference", "scene_camera", "SCENE_VIEWS"]
+           "frustum_planes", "cull_reference"]
 
 LOD_GRIDS: tuple[tuple[int, int], ...] = ((9, 17), (5, 9), (3, 5))  # 256, 64, 16 triangles
 STEM_FRONT = (0.30, 0.22, 0.14, 0.0)
 STEM_BACK = (0.30, 0.22, 0.14)
-SCENE_VIEWS = ("three-quarter", "top", "front", "side", "ground")
 _LOCAL = 64
 
 
@@ -204,26 +202,6 @@ def cull_reference(scene: Scene, cull_rows: NDArray[Any], camera: Camera, size: 
         inside = np.all(center @ planes[:, :3].T + planes[:, 3] >= -radius[:, None], axis=1)
         level[~inside | (2.0 * radius * ppu < settings.min_pixels)] = -1
     return level
-
-
-def scene_camera(scene: Scene, size: tuple[int, int], view: str = "three-quarter") -> Camera:
-    """A camera for ``view``: the standard views frame the scene's bounding box; ``ground`` stands
-    at the edge of the scene at 60 % of its height, looking across it (a walker's view, where
-    leaves span from a few pixels to the whole image)."""
-    if view not in SCENE_VIEWS:
-        raise ValueError(f"unknown view {view!r} (choose from {', '.join(SCENE_VIEWS)})")
-    lo, hi = scene.bounds()
-    if view != "ground":
-        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
-        return frame_view(view, corners, size)
-    center = (lo + hi) / 2
-    extent = hi - lo
-    eye = np.array([center[0], lo[1] - 0.15 * extent[1], lo[2] + 0.6 * extent[2]])
-    target = np.array([center[0], center[1], lo[2] + 0.35 * extent[2]])
-    far = float(np.linalg.norm(extent)) * 2 + 10.0
-    view_m = pyrr.matrix44.create_look_at(eye, target, np.array([0.0, 0.0, 1.0]), dtype=np.float64).T
-    proj = pyrr.matrix44.create_perspective_projection(50.0, size[0] / size[1], 0.05, far, dtype=np.float64).T
-    return Camera(view_m, proj, np.array([*eye, 1.0]), True)
 
 
 # -- GPU ----------------------------------------------------------------------------------------
@@ -516,12 +494,8 @@ def lod_switch_error(ctx: moderngl.Context, presets: Sequence[str], settings: Cu
                 w, h = (int(np.ceil((hi[i] - lo[i]) * ppu)) + 8 for i in (0, 1))
                 if max(w, h) > 4096:
                     continue  # switch happens above any image size we draw single leaves at
-                view_m = np.eye(4)
-                view_m[:3, 3] = (-(lo[0] + hi[0]) / 2, -(lo[1] + hi[1]) / 2, -(hi[2] + 1.0))
-                proj = pyrr.matrix44.create_orthogonal_projection(-w / (2 * ppu), w / (2 * ppu), -h / (2 * ppu),
-                                                                  h / (2 * ppu), 0.01, hi[2] - lo[2] + 2.0,
-                                                                  dtype=np.float64).T
-                cam = Camera(view_m, proj, np.array([0.0, 0.0, -1.0, 0.0]), False)
+                cam = top_down((lo[:2] + hi[:2]) / 2, hi[2] + 1.0, w / (2 * ppu), h / (2 * ppu),
+                               hi[2] - lo[2] + 2.0)
                 masks = []
                 for level in (k - 1, k):
                     img = r.render(cam, (w, h), CullSettings(level=level), samples=0)

@@ -23,10 +23,11 @@ Views:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 import pyrr
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["VIEWS", "Camera", "frame_view"]
 
@@ -45,6 +46,29 @@ class Camera:
     perspective: bool
 
 
+def look_at(eye: ArrayLike, target: ArrayLike, aspect: float, near: float, far: float,
+            fov_deg: float = FOV_DEG) -> Camera:
+    """Perspective camera at ``eye`` looking at ``target`` with +z up; ``fov_deg`` is the vertical
+    field of view. Every perspective camera of leafview is made here."""
+    eye = np.asarray(eye, dtype=np.float64)
+    view = pyrr.matrix44.create_look_at(eye, np.asarray(target, dtype=np.float64), np.array([0.0, 0.0, 1.0]),
+                                        dtype=np.float64).T
+    proj = pyrr.matrix44.create_perspective_projection(fov_deg, aspect, near, far, dtype=np.float64).T
+    return Camera(view, proj, np.array([*eye, 1.0]), True)
+
+
+def top_down(center: ArrayLike, z_top: float, half_w: float, half_h: float, depth: float) -> Camera:
+    """Orthographic camera looking down -z from height ``z_top`` above the point ``center`` (x, y),
+    seeing ``±half_w`` × ``±half_h`` world units and ``depth`` units below ``z_top``. Every
+    orthographic camera of leafview is made here."""
+    cx, cy = (float(c) for c in np.asarray(center, dtype=np.float64)[:2])
+    view = np.eye(4)
+    view[:3, 3] = (-cx, -cy, -z_top)
+    proj = pyrr.matrix44.create_orthogonal_projection(-half_w, half_w, -half_h, half_h, 0.01, depth,
+                                                      dtype=np.float64).T
+    return Camera(view, proj, np.array([0.0, 0.0, -1.0, 0.0]), False)
+
+
 def frame_view(view: str, points: NDArray[np.float64], size: tuple[int, int]) -> Camera:
     """Camera for ``view`` framing ``points`` (world space, (N, 3)) in an image of ``size`` = (w, h)."""
     if view not in VIEWS:
@@ -60,15 +84,7 @@ def frame_view(view: str, points: NDArray[np.float64], size: tuple[int, int]) ->
 def _top(lo: NDArray[np.float64], hi: NDArray[np.float64], w: int, h: int) -> Camera:
     extent = np.maximum(hi[:2] - lo[:2], 1e-9)
     scale = TOP_FILL * min(w / extent[0], h / extent[1])  # pixels per world unit
-    cx, cy = (lo[:2] + hi[:2]) / 2
-    half_w, half_h = w / (2 * scale), h / (2 * scale)
-    z_top = hi[2] + 1.0
-    depth = (hi[2] - lo[2]) + 2.0
-    view = np.eye(4)
-    view[:3, 3] = (-cx, -cy, -z_top)
-    proj = pyrr.matrix44.create_orthogonal_projection(-half_w, half_w, -half_h, half_h, 0.01, depth,
-                                                      dtype=np.float64).T
-    return Camera(view, proj, np.array([0.0, 0.0, -1.0, 0.0]), False)
+    return top_down((lo[:2] + hi[:2]) / 2, hi[2] + 1.0, w / (2 * scale), h / (2 * scale), (hi[2] - lo[2]) + 2.0)
 
 
 def _orbit(points: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64], w: int, h: int,
@@ -94,8 +110,34 @@ def _orbit(points: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.
     x, y, z = rel @ right, rel @ up, rel @ back
     dist = max(float(np.max(z + np.maximum(np.abs(x) / tan_x, np.abs(y) / tan_y))), 1e-6)
     eye = center + dist * back
-    view = pyrr.matrix44.create_look_at(eye, center, np.array([0.0, 0.0, 1.0]), dtype=np.float64).T
     depth = np.abs(rel @ back)
     near, far = max(dist - depth.max() * 1.5 - 1e-3, dist * 1e-3), dist + depth.max() * 1.5 + 1e-3
-    proj = pyrr.matrix44.create_perspective_projection(FOV_DEG, w / h, near, far, dtype=np.float64).T
-    return Camera(view, proj, np.array([*eye, 1.0]), True)
+    return look_at(eye, center, w / h, near, far)
+
+
+SCENE_VIEWS = ("three-quarter", "top", "front", "side", "ground")
+GROUND_FOV_DEG = 50.0
+
+
+class Bounded(Protocol):
+    """Anything with world-space bounds, such as :class:`leafview.scene.spec.Scene`."""
+
+    def bounds(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]: ...
+
+
+def scene_camera(scene: Bounded, size: tuple[int, int], view: str = "three-quarter") -> Camera:
+    """A camera for ``view``: the standard views frame the scene's bounding box; ``ground`` stands
+    at the edge of the scene at 60 % of its height, looking across it (a walker's view, where
+    leaves span from a few pixels to the whole image)."""
+    if view not in SCENE_VIEWS:
+        raise ValueError(f"unknown view {view!r} (choose from {', '.join(SCENE_VIEWS)})")
+    lo, hi = scene.bounds()
+    if view != "ground":
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        return frame_view(view, corners, size)
+    center = (lo + hi) / 2
+    extent = hi - lo
+    eye = np.array([center[0], lo[1] - 0.15 * extent[1], lo[2] + 0.6 * extent[2]])
+    target = np.array([center[0], center[1], lo[2] + 0.35 * extent[2]])
+    far = float(np.linalg.norm(extent)) * 2 + 10.0
+    return look_at(eye, target, size[0] / size[1], 0.05, far, fov_deg=GROUND_FOV_DEG)
