@@ -325,9 +325,11 @@ def accessors_glsl() -> str:
     """GLSL accessor macros of :data:`LEAF_SLOTS` and :data:`PAIR_MEMBERS`."""
     lines = ["// generated from leafview/gpu/layout.py: packed fields of LeafData"]
     lines += [slot.glsl() for slot in LEAF_SLOTS]
+    # one vec4 load per pair: the element is passed by value to a helper that picks its half (a
+    # macro that indexed the member in both branches made llvmpipe gather the element twice)
+    lines.append("vec2 leafview_pair_half(vec4 element, int j) { return (j % 2 == 0) ? element.xy : element.zw; }")
     for accessor, member in PAIR_MEMBERS.items():
-        lines.append(f"#define {accessor}(rec, j) ((((j) % 2) == 0) ? (rec).{member}[(j) / 2].xy "
-                     f": (rec).{member}[(j) / 2].zw)")
+        lines.append(f"#define {accessor}(rec, j) leafview_pair_half((rec).{member}[(j) / 2], (j))")
     return "\n".join(lines) + "\n"
 
 
