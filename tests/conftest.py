@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support.validate import ValidatorMissing, ensure_gltf_validator
 
 import leafview
 from leafview.core.params import LeafParams
@@ -107,6 +108,24 @@ def gl(_session_renderer):
     assert renderer.ctx.error == "GL_NO_ERROR", "a GL error was pending before this test"
     yield renderer
     assert renderer.ctx.error == "GL_NO_ERROR"
+
+
+@pytest.fixture(scope="session")
+def gltf_validator() -> tuple[str, Path]:
+    """(node, validate.mjs) of the pinned Khronos glTF validator, for the tests that run it.
+
+    Installed on first use with ``npm ci`` into ``tools/gltf_validator/node_modules`` (git ignores
+    it; a file lock keeps concurrent test runs from installing twice), so the README's test command
+    needs no separate step. Without node or npm, or when npm cannot reach the registry, the tests
+    that use it skip with the reason (what is missing and how to get it), or fail under
+    LEAFVIEW_REQUIRE_GL; pytest re-raises that outcome for every such test without trying again."""
+    try:
+        return ensure_gltf_validator()
+    except ValidatorMissing as exc:
+        reason = str(exc)
+    # outside the except block: the message once, not chained to the exception
+    require_or_skip(f"the Khronos glTF validator is unavailable: {reason}")
+    raise ValidatorMissing(reason)   # not reached: require_or_skip skips or fails
 
 
 @pytest.fixture(scope="session")

@@ -104,6 +104,7 @@ def test_decompose_trs_round_trip_and_rejects_shear():
     assert np.allclose(np.abs(quat_from_matrix(r)), [1, 0, 0, 0], atol=1e-12)
 
 
+@pytest.mark.usefixtures("gltf_validator")   # installs the Khronos validator on first use
 def test_gltf_scene_shares_meshes_and_instances(gl, scene, tmp_path):
     path = export_scene(scene, tmp_path / "scene.glb", resolution=GRID, renderer=gl, length_m=LENGTH)
     report = assert_gltf_clean(path)
@@ -133,6 +134,7 @@ def test_gltf_scene_shares_meshes_and_instances(gl, scene, tmp_path):
     assert report["info"]["drawCallCount"] >= 9
 
 
+@pytest.mark.usefixtures("gltf_validator")   # installs the Khronos validator on first use
 def test_gltf_scene_as_plain_nodes_opens_in_trimesh(gl, scene, tmp_path):
     path = export_scene(scene, tmp_path / "scene.gltf", resolution=GRID, renderer=gl, length_m=LENGTH,
                         instancing="nodes")
@@ -191,6 +193,7 @@ def test_obj_ply_scene_world_copies(gl, scene, tmp_path, suffix):
     assert np.abs(loaded.bounds - [expect.min(0), expect.max(0)]).max() <= 1e-6
 
 
+@pytest.mark.usefixtures("gltf_validator")   # installs the Khronos validator on first use
 def test_distinct_leaves_get_one_mesh_each(gl, presets, tmp_path):
     rng = np.random.default_rng(1)
     shapes = [presets[n].replace(transform=Transform()) for n in ("ovate", "holly", "beech", "willow")]
@@ -244,6 +247,7 @@ def test_export_bench_quick_reports_sizes_and_renderer(gl):
     json.dumps(res)                                                    # JSON-able
 
 
+@pytest.mark.usefixtures("gltf_validator")   # installs the Khronos validator on first use
 def test_cli_exports_a_scene_file(gl, tmp_path, capsys):
     """``leafview export SCENE.toml -o FILE`` with the scene module's own file format."""
     from leafview.cli import main

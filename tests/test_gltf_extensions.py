@@ -269,6 +269,7 @@ def test_valid_variants_are_not_reported(scene_file):
     assert any("element 5 is not a unit quaternion" in p for p in check_extensions(doc, bytes(blob)))
 
 
+@pytest.mark.usefixtures("gltf_validator")   # installs the Khronos validator on first use
 def test_khronos_validator_misses_what_the_checker_finds(scene_file, tmp_path):
     """The reason for this module: three breakages inside the extensions pass the Khronos
     glTF-Validator with no error, and the checker reports each."""
