@@ -91,6 +91,15 @@ BAD = [
     (("bending", "stiffness"), 0),
     (("transform", "scale"), 0.0),
     (("name",), 5),
+    (("name",), "x" * 257),                          # the limits of leafview.core.limits and the
+    (("name",), "nul\u0000"),                       # physical ranges of the field specs
+    (("shape", "zf"), [11.0, 0.0, 0.0]),
+    (("shape", "a2"), [0.0, -1e300, 0.0]),
+    (("shape", "silhouette", 1, 1), 1e9),
+    (("transform", "translation"), [1e308, 0.0, 0.0]),
+    (("transform", "scale"), 1e7),
+    (("bending", "stiffness"), 1e-9),
+    (("ripple", "phase"), [0.0, 1e5]),
     (("extra",), {}),
 ]
 

@@ -45,6 +45,7 @@ from leafview.botany.hermite import (
     fit_margin_report,
     hermite_knots,
 )
+from leafview.core.limits import check_name
 from leafview.core.params import ParamError
 
 __all__ = [
@@ -66,6 +67,9 @@ __all__ = [
 # eq. 1: the free parameters of one side, and a leaf made of two sides
 # ---------------------------------------------------------------------------------------------
 
+LANDMARK_LIMIT = 100.0    # |landmark coordinate| in leaf lengths (the midrib runs from 0 to 1)
+
+
 def _pair(value: Any, path: str) -> tuple[float, float]:
     try:
         x, y = (float(v) for v in value)
@@ -73,6 +77,8 @@ def _pair(value: Any, path: str) -> tuple[float, float]:
         raise ParamError(path, f"expected two numbers [x, y], got {value!r}") from None
     if not (math.isfinite(x) and math.isfinite(y)):
         raise ParamError(path, f"must be finite, got [{x}, {y}]")
+    if not (abs(x) <= LANDMARK_LIMIT and abs(y) <= LANDMARK_LIMIT):
+        raise ParamError(path, f"must lie within ±{LANDMARK_LIMIT:g} leaf lengths, got [{x:.3g}, {y:.3g}]")
     return (x, y)
 
 
@@ -293,9 +299,7 @@ class LandmarkLeaf:
             raise ParamError("right", "missing: the right side's landmarks")
         right = SideLandmarks.from_dict(data["right"], "right.")
         left = SideLandmarks.from_dict(data["left"], "left.") if "left" in data else right
-        name = data.get("name", "")
-        if not isinstance(name, str):
-            raise ParamError("name", f"expected a string, got {name!r}")
+        name = check_name(data.get("name", ""), "name")
         return cls(right, left, name)
 
 

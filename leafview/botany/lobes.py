@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import math
 import os
-import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -41,8 +40,10 @@ from numpy.typing import NDArray
 
 from leafview.botany.outline_fit import margin, rows_from_controls
 from leafview.botany.shapes import fit_info, shapes_params
+from leafview.core.limits import MAX_LOBES_PER_SIDE, check_name
 from leafview.core.params import LeafParams, Material, ParamError, Transform, _parse_group
 from leafview.deform.surface import control_polygons
+from leafview.inputs import read_toml
 from leafview.resources import asset_dir
 
 __all__ = ["Z_STEP", "KINDS", "LobePlacement", "LobedLeaf", "place_lobes", "lobe_leaves", "lobe_outlines",
@@ -238,6 +239,15 @@ _PAIR_KEYS = ("theta", "length")
 _STR_KEYS = ("name", "kind", "shape", "terminal", "web")
 
 
+LOBE_LIMIT = 360.0   # |number| of a lobed leaf file: lengths in primary-vein units, angles in degrees
+
+
+def _bounded(x: float, path: str) -> float:
+    if not abs(x) <= LOBE_LIMIT:
+        raise ParamError(path, f"{x!r} is outside ±{LOBE_LIMIT:g}")
+    return float(x)
+
+
 def lobed_from_dict(data: Mapping[str, Any]) -> LobedLeaf:
     """Validate a ``lobed = 1`` document (see ``assets/compound/*.toml``); ParamError names the
     field."""
@@ -253,34 +263,37 @@ def lobed_from_dict(data: Mapping[str, Any]) -> LobedLeaf:
         if key in data:
             if not isinstance(data[key], str):
                 raise ParamError(key, f"expected a string, got {type(data[key]).__name__}")
-            kw[key] = data[key]
+            kw[key] = check_name(data[key], key) if key == "name" else data[key]
     for key in _FLOAT_KEYS:
         if key in data:
             x = data[key]
             if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
                 raise ParamError(key, f"expected a finite number, got {x!r}")
-            kw[key] = float(x)
+            kw[key] = _bounded(x, key)
     for key in _PAIR_KEYS:
         if key in data:
             v = data[key]
             if (not isinstance(v, list) or len(v) != 2
                     or not all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)):
                 raise ParamError(key, f"expected two finite numbers [first, last], got {v!r}")
-            kw[key] = (float(v[0]), float(v[1]))
+            kw[key] = (_bounded(v[0], f"{key}[0]"), _bounded(v[1], f"{key}[1]"))
     if "half" in data:
         h = data["half"]
-        if isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= 12:
-            raise ParamError("half", f"expected a whole number of lobes per side in 1..12, got {h!r}")
+        if isinstance(h, bool) or not isinstance(h, int) or not 1 <= h <= MAX_LOBES_PER_SIDE:
+            raise ParamError("half", f"expected a whole number of lobes per side in 1..{MAX_LOBES_PER_SIDE}, got {h!r}")
         kw["half"] = h
     if "positions" in data:
         pos = data["positions"]
         if not isinstance(pos, list) or not all(isinstance(r, list) and len(r) == 3 for r in pos):
             raise ParamError("positions", "expected a list of [r, θ, l] rows")
+        if not 1 <= len(pos) <= MAX_LOBES_PER_SIDE:
+            raise ParamError("positions", f"{len(pos):,} lateral lobes; 1..{MAX_LOBES_PER_SIDE} per side are accepted")
         for i, row in enumerate(pos):
             for j, x in enumerate(row):
                 if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
                     raise ParamError(f"positions[{i}][{j}]", f"expected a finite number, got {x!r}")
-        kw["positions"] = tuple(tuple(float(x) for x in row) for row in pos)
+        kw["positions"] = tuple(tuple(_bounded(x, f"positions[{i}][{j}]") for j, x in enumerate(row))
+                                for i, row in enumerate(pos))
     if "material" in data:
         kw["material"] = _parse_group(Material, data["material"], "material", required=False)
     leaf = LobedLeaf(**kw)
@@ -325,12 +338,7 @@ def load_lobed_leaf(spec: str | os.PathLike[str]) -> LobedLeaf:
         else:
             raise ParamError("", f"no such file or built-in multilobed leaf {str(spec)!r} "
                              f"(built-in: {', '.join(found)})")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ParamError("", "no such file", str(path)) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ParamError("", f"TOML syntax error: {exc}", str(path)) from None
+    data = read_toml(path, what="multilobed leaf file")
     try:
         leaf = lobed_from_dict(data)
     except ParamError as exc:

@@ -37,6 +37,7 @@ import re
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from leafview.core.limits import BYTES_PER_LEAF_PARAMS, MAX_LEAVES, check_count, check_memory
 from leafview.core.params import (
     SCHEMA_VERSION,
     LeafParams,
@@ -44,6 +45,7 @@ from leafview.core.params import (
     parse_params,
     split_omega,
 )
+from leafview.inputs import parse_json
 
 __all__ = ["COMPACT_VERSION", "OPTIONAL_GROUPS", "compact_dict", "dumps", "dumps_leaves", "is_compact",
            "loads", "omega_path", "parse_compact", "parse_leaves", "round_params"]
@@ -222,11 +224,7 @@ def parse_compact(doc: Any, *, where: str = "", version: bool = True) -> LeafPar
 
 def loads(text: str) -> LeafParams:
     """Read one compact leaf from JSON text."""
-    try:
-        doc = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ParamError("", f"JSON syntax error: {exc.msg} at {exc.lineno}:{exc.colno}") from None
-    return parse_compact(doc)
+    return parse_compact(parse_json(text, "<compact leaf text>"))
 
 
 def parse_leaves(doc: Any) -> list[LeafParams]:
@@ -242,4 +240,6 @@ def parse_leaves(doc: Any) -> list[LeafParams]:
     leaves = doc.get("leaves")
     if not isinstance(leaves, list) or not leaves:
         raise ParamError("leaves", "expected a non-empty list of compact leaves")
+    check_count("leaves", len(leaves), 1, MAX_LEAVES)
+    check_memory("leaves", len(leaves) * BYTES_PER_LEAF_PARAMS, f"a leaf set of {len(leaves):,} leaves")
     return [parse_compact(item, where=f"leaves[{i}]", version=False) for i, item in enumerate(leaves)]

@@ -33,6 +33,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from leafview.core.limits import MAX_SILHOUETTE_ROWS, check_name
 from leafview.errors import ParamError
 
 __all__ = [
@@ -55,7 +56,19 @@ __all__ = [
 
 SCHEMA_VERSION = 1
 OMEGA_SIZE = 21             # Ω of the paper's quartic model (3 silhouette rows, no tilt)
-MAX_SILHOUETTE_ROWS = 7     # silhouette rows of an extended leaf: degree up to 8
+# MAX_SILHOUETTE_ROWS (7, degree up to 8) lives with the other limits in leafview.core.limits
+
+# The physical ranges every accepted value lies in (the hard ranges of the FieldSpecs below, and
+# what the JSON Schemas publish). They are chosen so that any accepted leaf evaluates, bends
+# (Geng, Hu & Zhang 2014, eq. 4) and renders to finite numbers in float64 and float32:
+OMEGA_LIMIT = 10.0          # |Ω control coordinate| in leaf lengths (the leaf itself is 1 long)
+TRANSLATION_LIMIT = 1e9     # |translation| in leaf lengths
+ROTATION_LIMIT = 720.0      # |rotation| in degrees
+SCALE_RANGE = (1e-6, 1e6)   # uniform scale
+STIFFNESS_RANGE = (1e-4, 1e4)   # flexural rigidity EI of midrib and petiole
+DIRECTION_LIMIT = 1e3       # |load direction component| (only the direction matters)
+MIN_DIRECTION = 1e-6        # the load direction's length must be at least this
+PHASE_LIMIT = 1e4           # |ripple phase θ|
 
 Vec3 = tuple[float, float, float]
 
@@ -84,14 +97,14 @@ def _spec(label: str, group: str, lo: float, hi: float, step: float, *,
 class Shape:
     """Ω: the Bézier control data of eqs 3-4 (leaf length normalised to 1 along +y)."""
 
-    a1: Vec3 = _spec("axis a1", "axis", -0.5, 0.5, 0.005, kind="vec3", default=(0.0, 1 / 3, 0.0))
-    a2: Vec3 = _spec("axis a2", "axis", -0.5, 1.0, 0.005, kind="vec3", default=(0.0, 2 / 3, 0.0))
+    a1: Vec3 = _spec("axis a1", "axis", -0.5, 0.5, 0.005, hard=(-OMEGA_LIMIT, OMEGA_LIMIT), kind="vec3", default=(0.0, 1 / 3, 0.0))
+    a2: Vec3 = _spec("axis a2", "axis", -0.5, 1.0, 0.005, hard=(-OMEGA_LIMIT, OMEGA_LIMIT), kind="vec3", default=(0.0, 2 / 3, 0.0))
     silhouette: tuple[Vec3, ...] = _spec(
-        "silhouette rows (v̄, x̄s, z̄s)", "silhouette", -0.5, 1.0, 0.005, kind="rows",
+        "silhouette rows (v̄, x̄s, z̄s)", "silhouette", -0.5, 1.0, 0.005, hard=(-OMEGA_LIMIT, OMEGA_LIMIT), kind="rows",
         default=((0.25, 0.35, 0.0), (0.5, 0.4, 0.0), (0.75, 0.25, 0.0)))
-    zf: tuple[float, ...] = _spec("z̄f (F at 1/3 width)", "curvature", -0.3, 0.3, 0.002, kind="per_row",
+    zf: tuple[float, ...] = _spec("z̄f (F at 1/3 width)", "curvature", -0.3, 0.3, 0.002, hard=(-OMEGA_LIMIT, OMEGA_LIMIT), kind="per_row",
                                   default=(0.0, 0.0, 0.0))
-    zg: tuple[float, ...] = _spec("z̄g (G at 2/3 width)", "curvature", -0.3, 0.3, 0.002, kind="per_row",
+    zg: tuple[float, ...] = _spec("z̄g (G at 2/3 width)", "curvature", -0.3, 0.3, 0.002, hard=(-OMEGA_LIMIT, OMEGA_LIMIT), kind="per_row",
                                   default=(0.0, 0.0, 0.0))
     tilt: tuple[float, ...] = _spec("row tilt φ (degrees, + towards the base)", "silhouette", -90.0, 90.0, 0.5,
                                     hard=(-90.0, 90.0), kind="per_row", default=(0.0, 0.0, 0.0))
@@ -167,10 +180,12 @@ class Transform:
     """World placement, kept apart from the shape (Chaurasia & Beardsley 2017, sec. 3, "coordinate frames")."""
 
     translation: Vec3 = _spec("translation", "transform", -5, 5, 0.01, kind="vec3",
+                              hard=(-TRANSLATION_LIMIT, TRANSLATION_LIMIT),
                               default=(0.0, 0.0, 0.0))
     rotation: Vec3 = _spec("rotation XYZ (degrees)", "transform", -180, 180, 1, kind="vec3",
+                           hard=(-ROTATION_LIMIT, ROTATION_LIMIT),
                            default=(0.0, 0.0, 0.0))
-    scale: float = _spec("scale", "transform", 0.05, 10, 0.01, hard=(1e-6, None), default=1.0)
+    scale: float = _spec("scale", "transform", 0.05, 10, 0.01, hard=SCALE_RANGE, default=1.0)
 
     def matrix(self) -> NDArray[np.float64]:
         """4×4 column-vector matrix ``T · Rz · Ry · Rx · s`` (rotations in degrees)."""
@@ -234,7 +249,8 @@ class Ripple:
                               default=(0.2, 0.2))
     interval: Pair = _spec("sampling interval k [left, right]", "ripple", 0.01, 1.0, 0.01, hard=(0.0, 64.0),
                            kind="pair", default=(0.3, 0.3))
-    phase: Pair = _spec("phase θ [left, right]", "ripple", 0.0, 64.0, 0.1, kind="pair", default=(8.0, 10.0))
+    phase: Pair = _spec("phase θ [left, right]", "ripple", 0.0, 64.0, 0.1, hard=(-PHASE_LIMIT, PHASE_LIMIT),
+                        kind="pair", default=(8.0, 10.0))
 
 
 @dataclass(frozen=True)
@@ -246,12 +262,15 @@ class Bending:
 
     load: float = _spec("load", "bending", 0.0, 40.0, 0.1, hard=(0.0, 1e4), default=0.0)
     direction: Vec3 = _spec("load direction (world)", "bending", -1, 1, 0.01, kind="vec3",
+                            hard=(-DIRECTION_LIMIT, DIRECTION_LIMIT),
                             default=(0.0, 0.0, -1.0))
-    stiffness: float = _spec("midrib EI", "bending", 0.05, 10.0, 0.01, positive=True, default=1.0)
+    stiffness: float = _spec("midrib EI", "bending", 0.05, 10.0, 0.01, hard=STIFFNESS_RANGE, positive=True,
+                         default=1.0)
     twist: float = _spec("twist at the apex (degrees)", "bending", -180, 180, 1, hard=(-720.0, 720.0),
                          default=0.0)
     petiole_length: float = _spec("petiole length", "bending", 0.0, 0.5, 0.005, hard=(0.0, 10.0), default=0.0)
-    petiole_stiffness: float = _spec("petiole EI", "bending", 0.05, 10.0, 0.01, positive=True, default=1.0)
+    petiole_stiffness: float = _spec("petiole EI", "bending", 0.05, 10.0, 0.01, hard=STIFFNESS_RANGE,
+                                    positive=True, default=1.0)
 
     @property
     def active(self) -> bool:
@@ -441,7 +460,11 @@ def _parse_field(value: Any, spec: FieldSpec, path: str, rows: int = 3) -> Any:
             value = value.tolist()
         if not isinstance(value, (list, tuple)) or not 3 <= len(value) <= MAX_SILHOUETTE_ROWS:
             raise ParamError(path, f"expected 3 to {MAX_SILHOUETTE_ROWS} rows [v̄, x̄s, z̄s]")
-        return tuple(_vector(row, 3, f"{path}[{i}]") for i, row in enumerate(value))
+        rows_out = tuple(_vector(row, 3, f"{path}[{i}]") for i, row in enumerate(value))
+        for i, row in enumerate(rows_out):
+            for j, x in enumerate(row):
+                _check_range(x, spec, f"{path}[{i}][{j}]")
+        return rows_out
     if spec.kind == "per_row":
         if isinstance(value, np.ndarray):
             value = value.tolist()
@@ -478,8 +501,9 @@ def _parse_group(cls: type, data: Any, group: str, *, required: bool) -> Any:
     obj = cls(**values)
     if cls is Shape:
         _check_shape(obj)
-    if cls is Bending and not any(obj.direction):
-        raise ParamError(f"{group}.direction", "the load direction must not be the zero vector")
+    if cls is Bending and not math.hypot(*obj.direction) >= MIN_DIRECTION:
+        raise ParamError(f"{group}.direction", f"the load direction must not be the zero vector "
+                                               f"(length at least {MIN_DIRECTION:g})")
     return obj
 
 
@@ -517,9 +541,7 @@ def parse_params(data: Any) -> LeafParams:
         raise ParamError("schema", f"expected an integer, got {type(schema).__name__} {schema!r}")
     if schema != SCHEMA_VERSION:
         raise ParamError("schema", f"unsupported schema version {schema} (this leafview reads {SCHEMA_VERSION})")
-    name = data.get("name", "")
-    if not isinstance(name, str):
-        raise ParamError("name", f"expected a string, got {type(name).__name__}")
+    name = check_name(data.get("name", ""), "name")
     if "shape" not in data:
         raise ParamError("shape", "missing table")
     groups = {g: _parse_group(cls, data[g], g, required=(g == "shape"))

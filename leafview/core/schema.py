@@ -32,6 +32,7 @@ from typing import Any
 
 from leafview.core import params as P
 from leafview.core.compact import COMPACT_VERSION, OPTIONAL_GROUPS
+from leafview.core.limits import MAX_NAME_CHARS
 
 __all__ = ["SCHEMA_ID", "DIALECT", "compact_schema", "compact_leaf_schema", "doc_line", "leaf_schema"]
 
@@ -66,6 +67,12 @@ def _number(spec: P.FieldSpec, integer: bool = False) -> dict[str, Any]:
     return out
 
 
+def _name_schema(description: str) -> dict[str, Any]:
+    """A name: at most MAX_NAME_CHARS characters, no control characters (:func:`leafview.core.limits.check_name`)."""
+    return {"type": "string", "maxLength": MAX_NAME_CHARS, "pattern": "^[^\\u0000-\\u001f\\u007f-\\u009f]*$",
+            "description": description}
+
+
 def _array(items: dict[str, Any], n_min: int, n_max: int | None = None) -> dict[str, Any]:
     return {"type": "array", "items": items, "minItems": n_min, "maxItems": n_min if n_max is None else n_max}
 
@@ -87,8 +94,8 @@ def _field(spec: P.FieldSpec) -> dict[str, Any]:
                "prefixItems": [{"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1,
                                 "description": "v̄: where the row's foot sits on the axis, strictly inside (0, 1) "
                                                "and increasing from row to row"},
-                               {"type": "number", "description": "x̄s: half-width offset along the axis normal"},
-                               {"type": "number", "description": "z̄s: height"}]}
+                               {**_number(spec), "description": "x̄s: half-width offset along the axis normal"},
+                               {**_number(spec), "description": "z̄s: height"}]}
         return _array(row, 3, _max_rows())
     if kind == "per_row":
         return _array(_number(spec), 3, _max_rows())
@@ -120,7 +127,7 @@ def leaf_schema() -> dict[str, Any]:
     default = P.LeafParams().to_dict()
     props: dict[str, Any] = {
         "schema": {"const": P.SCHEMA_VERSION, "description": "file format version"},
-        "name": {"type": "string", "description": "the leaf's name (the file name when absent)"},
+        "name": _name_schema("the leaf's name (the file name when absent)"),
     }
     per_row: list[str] = []
     for group, cls in _groups().items():
@@ -164,7 +171,7 @@ def _omega_schema() -> dict[str, Any]:
 
     specs = P.field_specs()
     vbar: dict[str, Any] = {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1}
-    plain: dict[str, Any] = {"type": "number"}
+    plain: dict[str, Any] = {"type": "number", "minimum": -P.OMEGA_LIMIT, "maximum": P.OMEGA_LIMIT}
     tilt = _number(specs["shape.tilt"])
     alternatives: list[dict[str, Any]] = []
     for size, n in P.omega_sizes().items():

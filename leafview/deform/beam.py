@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.blade import blade_partials
-from leafview.core.params import Bending, LeafParams, Ripple, Shape, Transform, Vec3
+from leafview.core.params import Bending, LeafParams, ParamError, Ripple, Shape, Transform, Vec3
 
 __all__ = ["solve_bending", "residual", "bend_profile", "BendProfile", "BEND_SAMPLES", "rotation",
            "sample_clamped"]
@@ -161,6 +161,14 @@ def _bend_profile_cached(shape: Shape, bending: Bending, rotation_deg: Vec3, sca
     vm = 0.5 * (v[1:] + v[:-1])
     width = np.linalg.norm(_blade_points(params, np.ones_like(vm), vm) - _blade_points(params, -np.ones_like(vm), vm), axis=1)
     ds = np.linalg.norm(seg, axis=1)
+    # a segment whose joints coincide (a cusp of the axis exactly between two samples) has no
+    # direction: give it a tiny length along its neighbour's direction so eq. 4 stays defined
+    floor = 1e-12 * max(float(ds.sum()), 1.0)
+    short = ~(ds > floor)
+    if short.any():
+        seg = seg.copy()
+        seg[short] = floor * np.array([0.0, 1.0, 0.0])
+        ds = np.linalg.norm(seg, axis=1)
     # strip area × load, per unit of segment length (÷ the mean step), so that eq. 4's ds² makes
     # each φ_i ≈ ds_i · moment / EI and the shape does not depend on the number of segments
     forces = b.load * width * ds / ds.mean()
@@ -194,4 +202,7 @@ def _bend_profile_cached(shape: Shape, bending: Bending, rotation_deg: Vec3, sca
     phi_k = np.interp(vk, v, blade_phi)
     bent_k = np.stack([np.interp(vk, v, blade_points[:, c]) for c in range(3)], axis=1)
     straight_k = _blade_points(params, np.zeros(k), vk)
-    return BendProfile(axis, phi_k, bent_k - straight_k, twist)
+    delta = bent_k - straight_k
+    if not (np.isfinite(phi_k).all() and np.isfinite(delta).all()):   # unreachable within the accepted ranges
+        raise ParamError("bending", "the cantilever solve gave non-finite angles for this leaf")
+    return BendProfile(axis, phi_k, delta, twist)
