@@ -8,7 +8,12 @@
 * ``param_vs_baked_speed`` and ``baked_vs_param_bytes`` from the core suite's instancing
   measurement (:func:`leafview.bench.instancing.instanced_vs_baked`), so both suites report the
   same quantity;
-* the 10⁶-leaf field: build, upload and one 1280×720 frame, wall time (not in ``--quick``).
+* the 10⁶-leaf field: build, upload and one 1280×720 frame, wall time (not in ``--quick``);
+* ``leaf_set_upload_ms_per_leaf``: a leaf set of 10⁴ explicit leaves (10³ in ``--quick``), each
+  its own species and shape (the field's leaves, placed, bending off):
+  :func:`~leafview.scene.spec.scene_from_leaves` and the :class:`~leafview.gpu.scene.SceneRenderer`
+  set-up, milliseconds per leaf; ``leaf_set_bent_ms_per_leaf`` the same for 200 bent leaves (20),
+  where one cantilever solve per shape dominates.
 
 Timings are medians with ``ctx.finish()`` before the clock stops; GL_RENDERER is part of the
 result. Nothing here is asserted.
@@ -24,13 +29,13 @@ import moderngl
 
 from leafview.bench.instancing import bytes_per_leaf, instanced_vs_baked
 from leafview.bench.timing import Progress, bench_context, gl_info, median_time
-from leafview.core.params import LeafParams
+from leafview.core.params import Bending, LeafParams
 from leafview.gpu.context import check_error
 from leafview.gpu.instanced import OffscreenTarget
 from leafview.gpu.scene import CullSettings, SceneRenderer, lod_switch_error
 from leafview.resources import resolve_preset
 from leafview.scene.camera import scene_camera
-from leafview.scene.spec import SceneSpec, build_scene
+from leafview.scene.spec import SceneSpec, build_scene, scene_from_leaves
 
 __all__ = ["run", "format_table", "GOALS"]
 
@@ -85,6 +90,19 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
                             res["lod_off_ms"] = 1e3 * statistics.median(t_off)
                         check_error(ctx, f"scene frame ({n} leaves, {view})")
                     res["frames"][str(n)] = row
+            for key, n_set, bent in (("leaf_set_upload_ms_per_leaf", 1_000 if quick else 10_000, False),
+                                     ("leaf_set_bent_ms_per_leaf", 20 if quick else 200, True)):
+                spec = _spec(n_set)
+                if not bent:   # the cantilever solve of each bent shape is measured on its own
+                    spec = spec.replace(species=tuple(s.replace(bending=Bending()) for s in spec.species))
+                else:
+                    spec = spec.replace(species=tuple(s for s in spec.species if s.bending.active) or spec.species)
+                leaf_set = build_scene(spec).placed_leaves()
+                t0 = time.perf_counter()
+                with SceneRenderer(ctx, scene_from_leaves(leaf_set)):
+                    ctx.finish()
+                    res[key] = 1e3 * (time.perf_counter() - t0) / n_set
+                res[key.replace("_ms_per_leaf", "_leaves")] = n_set
             progress.step("LOD switch")
             res["lod_switch_px"] = lod_switch_error(ctx, ("ovate", "lanceolate", "serrate", "maize"))
             progress.step("parameters vs baked mesh")
@@ -127,6 +145,9 @@ def format_table(res: dict[str, Any]) -> str:
     lines.append(f"lod_speedup            {res['lod_speedup']:.2f}×  ({goal('lod_speedup')}; "
                  f"{res['lod_speedup_leaves']:,} leaves, ground camera, off {res['lod_off_ms']:.0f} ms)")
     lines.append(f"lod_switch_px          {res['lod_switch_px']:.2f} px (largest outline change at a level switch)")
+    lines.append(f"leaf_set_upload_ms_per_leaf {res['leaf_set_upload_ms_per_leaf']:.3f} ms  "
+                 f"({res['leaf_set_upload_leaves']:,} explicit leaves, a shape each: scene and GPU set-up; "
+                 f"bent: {res['leaf_set_bent_ms_per_leaf']:.1f} ms, {res['leaf_set_bent_leaves']} leaves)")
     lines.append(f"param_vs_baked_speed   {res['param_vs_baked_speed']:.3f}  ({goal('param_vs_baked_speed')}; "
                  f"{res['scene_leaves']:,} leaves of {res['triangles_per_leaf']} triangles)")
     lines.append(f"baked_vs_param_bytes   {res['baked_vs_param_bytes']:.0f}×  ({goal('baked_vs_param_bytes')})")

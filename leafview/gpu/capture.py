@@ -14,6 +14,7 @@ import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
+from leafview.gpu.limits import capture_bytes, check_buffer, context_alive, ensure_alive
 from leafview.gpu.owner import GrowingBuffer, release_all
 
 __all__ = ["FeedbackCapture", "Recording", "VERTEX_BYTES"]
@@ -31,7 +32,9 @@ class Recording:
         self.capacity = int(vertices)
         self.count = 0
         self._temporary: moderngl.Buffer | None = None
-        need = self.capacity * VERTEX_BYTES
+        need = capture_bytes(self.capacity)
+        check_buffer(need, "vertices", f"a capture of {self.capacity:,} vertices")  # before allocating
+        ensure_alive(capture.ctx, "a capture")
         if need > _KEEP_BYTES:
             self._temporary = capture.ctx.buffer(reserve=need)
             self.buffer = self._temporary
@@ -59,7 +62,7 @@ class Recording:
         release_all(self._temporary)
         self._temporary = None
         prev = self._previous
-        if prev is not None and type(prev.mglo).__name__ != "InvalidObject":
+        if prev is not None and type(prev.mglo).__name__ != "InvalidObject" and context_alive(self._capture.ctx):
             prev.use()
 
     def __enter__(self) -> Recording:
@@ -96,7 +99,7 @@ class FeedbackCapture:
             return rec.read()
 
     def release(self) -> None:
-        if self._fbo is not None:
+        if self._fbo is not None and context_alive(self.ctx):
             self.ctx.detect_framebuffer(0).use()
         release_all(self._fbo, self._color)
         self._fbo = self._color = None

@@ -52,4 +52,5 @@ class FrameUniforms:
         self.buffer.bind_to_uniform_block(FRAME_BINDING)
 
     def release(self) -> None:
+        """Release the buffer (idempotent)."""
         self.buffer.release()

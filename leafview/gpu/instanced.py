@@ -29,8 +29,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.params import Jitter, LeafParams, Material, Shape, Transform
 from leafview.deform.surface import grid_indices, grid_uv, tessellate
+from leafview.errors import GpuLimitError
 from leafview.gpu.frame import FrameUniforms, Lighting
 from leafview.gpu.layout import LEAF_BLOCK, LEAVES_BINDING, feature_defines, pack_leaves
+from leafview.gpu.limits import capture_bytes, check_buffer, check_grid, ensure_alive
 from leafview.gpu.owner import GLObjects
 from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, JitterTable
 from leafview.gpu.targets import OffscreenTarget, read_rgba
@@ -179,13 +181,15 @@ class InstancedLeaves(_Batch):
                  resources: GpuResources | None = None) -> None:
         recs = self.records = _as_records(records)
         self.count = int(recs.shape[0])
+        ensure_alive(ctx, "uploading instanced leaves")
+        check_grid(grid)
         limit = int(ctx.info["GL_MAX_SHADER_STORAGE_BLOCK_SIZE"])
         nbytes = max(recs.nbytes, LEAF_BLOCK.nbytes)
         if nbytes > limit:
-            raise ValueError(
-                f"{self.count} leaves need a {nbytes}-byte storage buffer, above this driver's "
-                f"GL_MAX_SHADER_STORAGE_BLOCK_SIZE = {limit} bytes "
-                f"(at most {limit // LEAF_BLOCK.nbytes} leaves per draw)")
+            raise GpuLimitError(
+                "leaves", f"{self.count:,} leaves need a {nbytes:,}-byte storage buffer, above this driver's "
+                f"GL_MAX_SHADER_STORAGE_BLOCK_SIZE = {limit:,} bytes "
+                f"(at most {limit // LEAF_BLOCK.nbytes:,} leaves per draw)")
         super().__init__(ctx, resources)
         try:
             self.nu, self.nv = grid
@@ -223,6 +227,8 @@ class InstancedLeaves(_Batch):
         if not self.count:
             z = np.zeros((0, nverts, 3), np.float32)
             return z, z.copy()
+        check_buffer(capture_bytes(self.count * nverts), "leaves",
+                     f"capturing {self.count:,} leaves of {self.nu}×{self.nv} vertices")
         self._bind()
         points = self.resources.grid(self.nu, self.nv).points(self.program)
         pos, nrm = self.resources.capture.points(points, nverts, self.count)
@@ -239,11 +245,15 @@ class BakedLeaves(_Batch):
     def __init__(self, ctx: moderngl.Context, positions: ArrayLike, normals: ArrayLike,
                  grid: tuple[int, int], front: ArrayLike, back: ArrayLike, *,
                  resources: GpuResources | None = None) -> None:
+        nu, nv = check_grid(grid)
+        pos = np.asarray(positions, np.float32).reshape(-1, nu * nv, 3)
+        check_buffer(pos.shape[0] * nu * nv * BAKED_VERTEX_BYTES, "leaves",
+                     f"{pos.shape[0]:,} baked leaves of {nu}×{nv} vertices")
+        ensure_alive(ctx, "uploading baked leaves")
         super().__init__(ctx, resources)
         try:
-            self.nu, self.nv = grid
+            self.nu, self.nv = nu, nv
             nverts = self.nu * self.nv
-            pos = np.asarray(positions, np.float32).reshape(-1, nverts, 3)
             nrm = np.asarray(normals, np.float32).reshape(-1, nverts, 3)
             self.count = n = pos.shape[0]
             if nrm.shape[0] != n:

@@ -41,5 +41,7 @@ class LeafPrepare:
         self.ctx.memory_barrier(moderngl.ALL_BARRIER_BITS)
 
     def release(self) -> None:
+        """Release the program if this pass compiled it (idempotent)."""
         if self._owned:
+            self._owned = False
             self.shader.release()

@@ -17,9 +17,11 @@ import moderngl
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from leafview.core.blade import uv_arrays
 from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.params import LeafParams
-from leafview.gpu.context import create_headless_context
+from leafview.errors import GpuLimitError
+from leafview.gpu.context import acquire_headless_context, recycle_headless_context
 from leafview.gpu.frame import FrameUniforms, Lighting, fill_frame
 from leafview.gpu.layout import (
     FRAME_BINDING,
@@ -30,6 +32,17 @@ from leafview.gpu.layout import (
     pack_leaf,
     pack_leaves,
     ripple_keys,
+)
+from leafview.gpu.limits import (
+    MAX_RESOURCE_BYTES,
+    ContextLimits,
+    capture_bytes,
+    check_buffer,
+    check_grid,
+    check_image,
+    check_memory,
+    context_alive,
+    ensure_alive,
 )
 from leafview.gpu.owner import GLObjects, GrowingBuffer
 from leafview.gpu.prepare import LeafPrepare
@@ -51,8 +64,9 @@ class LeafRenderer:
     Parameters
     ----------
     ctx:
-        A moderngl context (window or headless). ``None`` creates a headless EGL context that
-        this renderer owns and releases.
+        A moderngl context (window or headless). ``None`` takes a headless EGL context that this
+        renderer owns; :meth:`release` hands it back for the next renderer (a process keeps at
+        most two; creating and destroying EGL contexts leaks driver memory).
     resources:
         Shared programs, grids, targets and capture (:class:`GpuResources`); ``None`` creates a
         set that this renderer owns and releases.
@@ -60,10 +74,18 @@ class LeafRenderer:
 
     def __init__(self, ctx: moderngl.Context | None = None, *, resources: GpuResources | None = None) -> None:
         self._owns_ctx = ctx is None
-        self.ctx = ctx if ctx is not None else create_headless_context()
+        self.ctx = ctx if ctx is not None else acquire_headless_context()
         self._objects = GLObjects()
+        self._pooled: GpuResources | None = None   # resources that go back to the pool with the context
         try:
-            self.resources = resources if resources is not None else self._objects.own(GpuResources(self.ctx))
+            self.limits = ContextLimits.of(self.ctx)
+            if resources is not None:
+                self.resources = resources
+            elif self._owns_ctx:   # a recycled context keeps its compiled programs in ctx.extra
+                extra = self.ctx.extra
+                self.resources = self._pooled = extra if isinstance(extra, GpuResources) else GpuResources(self.ctx)
+            else:
+                self.resources = self._objects.own(GpuResources(self.ctx))
             self.program = self.leaf_program({})  # every feature: set_leaf/draw/capture and the viewer
             self.ripples = self._objects.own(self.resources.ripple_pass())
             self.jitter = self._objects.own(JitterTable(self.ctx))
@@ -82,11 +104,14 @@ class LeafRenderer:
 
     # -- lifetime -------------------------------------------------------------------------------
     def release(self) -> None:
-        """Release what this renderer owns (and its context, if it created it); idempotent."""
+        """Release what this renderer owns (and its context, if it created it); idempotent, and
+        safe after the context itself was released (the objects went with it)."""
         self._objects.release()
-        if self._owns_ctx:
+        if self._owns_ctx:   # every other object is released: the context goes back to the pool
             self._owns_ctx = False
-            self.ctx.release()
+            if context_alive(self.ctx):
+                self.ctx.extra = self._pooled
+            recycle_headless_context(self.ctx)
 
     def __enter__(self) -> LeafRenderer:
         return self
@@ -182,14 +207,23 @@ class LeafRenderer:
         w, h = _check_size(size)
         if view not in VIEWS:
             raise ValueError(f"unknown view {view!r} (choose from {', '.join(VIEWS)})")
-        nu, nv = grid
+        nu, nv = check_grid(grid)
+        ensure_alive(self.ctx, "rendering")
         if samples is None:
             samples = 0 if view == "top" else 4
         samples = min(samples, self.ctx.max_samples)
         bg = _background(background)
+        # every size is checked before the first GL object of the request is made
+        check_image(self.limits, (w, h), samples, linear=linear)
         cols = max(1, min(BATCH, _MAX_ATLAS // w))
         rows = max(1, _MAX_ATLAS // h)
-        chunk = max(1, min(BATCH, cols * rows))
+        chunk = max(1, min(BATCH, cols * rows, MAX_RESOURCE_BYTES // capture_bytes(nu * nv)))
+        first = min(len(leaves), chunk)
+        if first:
+            c = min(first, cols)
+            check_image(self.limits, (c * w, -(-first // c) * h), samples, linear=linear)
+            check_memory(len(leaves) * w * h * (16 if linear else 4), "leaves",
+                         f"{len(leaves):,} images of {w}×{h}")
         images: list[NDArray[Any]] = []
         for start in range(0, len(leaves), chunk):
             images += self._render_chunk(leaves[start:start + chunk], w, h, view, bg, (nu, nv), samples,
@@ -283,11 +317,13 @@ class LeafRenderer:
         """Positions and normals (leaf space) computed by the rendering vertex shader at (u, v),
         read back through transform feedback: two (N, 3) float32 arrays. ``defines`` selects a
         shader permutation (default: the full program)."""
-        uu, vv = np.broadcast_arrays(np.asarray(u, np.float32), np.asarray(v, np.float32))
-        uv = np.stack([uu.ravel(), vv.ravel()], axis=-1)
+        uu, vv = uv_arrays(u, v)   # finite, |u| <= 1, 0 <= v <= 1 (ValueError), as the numpy reference
+        uv = np.stack([uu, vv], axis=-1).astype(np.float32)
         n = uv.shape[0]
         if n == 0:
             return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)
+        check_buffer(capture_bytes(n), "u, v", f"capturing {n:,} points")
+        ensure_alive(self.ctx, "capturing")
         self.set_leaf(params)
         self._bind()
         program = self.program if defines is None else self.leaf_program(defines)
@@ -301,13 +337,15 @@ class LeafRenderer:
 
 
 def _check_size(size: Any) -> tuple[int, int]:
+    """``size`` (N or (width, height)) as two positive ints; the context's limits are checked by
+    :func:`~leafview.gpu.limits.check_image`."""
     scalar = bool(np.isscalar(size))
     try:
         w, h = (int(size), int(size)) if scalar else (int(size[0]), int(size[1]))
-    except (TypeError, ValueError, IndexError):
-        raise ValueError(f"size must be N or (width, height), got {size!r}") from None
-    if not (1 <= w <= 16384 and 1 <= h <= 16384):
-        raise ValueError(f"image size {w}×{h} outside 1..16384")
+    except (TypeError, ValueError, IndexError, OverflowError):
+        raise GpuLimitError("size", f"must be N or (width, height), got {size!r}") from None
+    if w < 1 or h < 1:
+        raise GpuLimitError("size", f"{w}×{h}: width and height must be at least 1")
     return w, h
 
 

@@ -25,6 +25,7 @@ from leafview.deform.fbm import RIPPLE_SAMPLES
 from leafview.deform.surface import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table
 from leafview.gpu.capture import FeedbackCapture
 from leafview.gpu.layout import JITTER_UNIT
+from leafview.gpu.limits import check_grid
 from leafview.gpu.owner import GLObjects, ReleasingLRU, next_pow2
 from leafview.gpu.prepare import LeafPrepare
 from leafview.gpu.programs import ProgramCache
@@ -47,7 +48,8 @@ class Grid:
     not kept by callers: an evicted grid releases them."""
 
     def __init__(self, ctx: moderngl.Context, nu: int, nv: int) -> None:
-        self.ctx, self.nu, self.nv = ctx, int(nu), int(nv)
+        self.nu, self.nv = check_grid((nu, nv))   # before grid_uv allocates anything
+        self.ctx = ctx
         self.vertices = self.nu * self.nv
         self._objects = GLObjects()
         try:
@@ -163,7 +165,8 @@ class GpuResources:
 
     def grid(self, nu: int, nv: int) -> Grid:
         """The (nu × nv) grid (cached, at most a few kept)."""
-        return self._grids.get((int(nu), int(nv)), lambda: Grid(self.ctx, nu, nv))
+        nu, nv = check_grid((nu, nv))
+        return self._grids.get((nu, nv), lambda: Grid(self.ctx, nu, nv))
 
     def target(self, size: tuple[int, int], samples: int = 0, *, linear: bool = False) -> RenderTarget:
         """A render target (cached by size, samples and format; at most a few kept). Use it at

@@ -48,6 +48,7 @@ from leafview.gpu.layout import (
     pack_leaves,
     ripple_keys,
 )
+from leafview.gpu.limits import MAX_RESOURCE_BYTES, capture_bytes, check_scene, ensure_alive
 from leafview.gpu.owner import GLObjects
 from leafview.gpu.resources import GpuResources, JitterTable
 from leafview.resources import resolve_preset
@@ -61,14 +62,26 @@ LOD_GRIDS: tuple[tuple[int, int], ...] = ((9, 17), (5, 9), (3, 5))  # 256, 64, 1
 STEM_FRONT = (0.30, 0.22, 0.14, 0.0)
 STEM_BACK = (0.30, 0.22, 0.14)
 _LOCAL = 64
+_CULL_CHUNK = 8192     # species records captured at once when measuring culling spheres and LOD errors
 
 
 # -- packing (numpy) ------------------------------------------------------------------------------
 def species_tables(scene: Scene) -> tuple[NDArray[Any], NDArray[np.float32], list[tuple[int, float]]]:
-    """Per-species LEAF_BLOCK records (bend solved once per species), the jitter table rows they
-    index and the ripple signal keys (row i of the signal buffer)."""
-    recs, table = pack_leaves(scene.species)
-    return recs, table, ripple_keys(scene.species)
+    """Per-species LEAF_BLOCK records (bend solved once per distinct species), the jitter table
+    rows they index and the ripple signal keys (row i of the signal buffer). Species that differ
+    only in name (a leaf set's leaves of one shape) are packed once."""
+    index: dict[tuple[Any, ...], int] = {}
+    species: list[LeafParams] = []
+    inverse = np.empty(len(scene.species), np.int64)
+    for i, sp in enumerate(scene.species):
+        key = (sp.shape, sp.jitter, sp.material, sp.transform, sp.ripple, sp.bending)
+        k = index.get(key)
+        if k is None:
+            k = index[key] = len(species)
+            species.append(sp)
+        inverse[i] = k
+    recs, table = pack_leaves(species)
+    return recs[inverse], table, ripple_keys(species)
 
 
 def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
@@ -115,27 +128,67 @@ def _lod_error(params: Any, coarse: tuple[int, int], fine: tuple[int, int] = DEF
 
 
 def species_cull(scene: Scene, grids: Sequence[tuple[int, int]] = LOD_GRIDS) -> NDArray[Any]:
-    """SPECIES_CULL_BLOCK rows: each species' leaf-space bounding sphere, widened for the scene's
-    per-leaf variation, and the outline error of each level's grid (see :func:`_lod_error`).
+    """SPECIES_CULL_BLOCK rows, the numpy reference: every species evaluated at every level's
+    grid (:func:`leafview.deform.surface.evaluate`), then :func:`cull_rows_from_points`.
+    :class:`SceneRenderer` computes the same rows from the points its vertex shader captures, once
+    per distinct species record."""
+    if len(grids) > 4:
+        raise ValueError("at most 4 levels of detail")
+    points = [np.stack([evaluate(sp, *grid_uv(*g).astype(np.float64).T) for sp in scene.species]) for g in grids]
+    return cull_rows_from_points(points, grids, scene.spec.variation)
+
+
+def cull_rows_from_points(points: Sequence[NDArray[Any]], grids: Sequence[tuple[int, int]],
+                          variation: float) -> NDArray[Any]:
+    """SPECIES_CULL_BLOCK rows of S species from their leaf-space points at each level's grid
+    (``points[k]``: (S, nu_k·nv_k, 3), :func:`~leafview.deform.surface.grid_uv` order), vectorised
+    over species.
+
+    * ``sphere``: centre of the points' box, radius to the farthest point of any level (every
+      drawn vertex is inside), widened for the variation and by 1e-3.
+    * ``lod_error[k]``: largest distance between the level-0 points and the piecewise-bilinear
+      surface through level k's points (see :func:`_lod_error`).
 
     Variation bound: every control point moves by at most ``variation × |point|`` (factors in
     ``1 ± variation``) and the surface is a convex combination of control points, so the sphere
     grows by ``variation × max |point|``; the LOD errors are scaled by ``1 + 2 variation``."""
-    if len(grids) > 4:
-        raise ValueError("at most 4 levels of detail")
-    out = np.zeros(len(scene.species), SPECIES_CULL_BLOCK.dtype)
-    uv = grid_uv(*DEFAULT_GRID).astype(np.float64)
-    var = scene.spec.variation
-    for k, sp in enumerate(scene.species):
-        pts = evaluate(sp, uv[:, 0], uv[:, 1])
-        lo, hi = pts.min(axis=0), pts.max(axis=0)
-        center = (lo + hi) / 2
-        radius = float(np.linalg.norm(pts - center, axis=1).max())
-        radius += var * float(np.linalg.norm(pts, axis=1).max()) + 1e-3
-        out[k]["sphere"] = (*center, radius)
-        errs = [0.0] + [_lod_error(sp, g, grids[0]) for g in grids[1:]]
-        out[k]["lod_error"][:len(errs)] = np.asarray(errs) * (1.0 + 2.0 * var)
+    pts = [np.asarray(p, np.float64) for p in points]
+    n = pts[0].shape[0]
+    out = np.zeros(n, SPECIES_CULL_BLOCK.dtype)
+    if n == 0:
+        return out
+    every = np.concatenate(pts, axis=1)
+    center = (every.min(axis=1) + every.max(axis=1)) / 2
+    radius = np.linalg.norm(every - center[:, None], axis=2).max(axis=1)
+    radius += variation * np.linalg.norm(every, axis=2).max(axis=1) + 1e-3
+    out["sphere"][:, :3] = center
+    out["sphere"][:, 3] = radius
+    uv = grid_uv(*grids[0]).astype(np.float64)
+    ref = pts[0]
+    for k in range(1, len(grids)):
+        cu, cv = grids[k]
+        g = pts[k].reshape(n, cv, cu, 3)
+        x = (uv[:, 0] + 1.0) / 2.0 * (cu - 1)
+        y = uv[:, 1] * (cv - 1)
+        i = np.minimum(x.astype(int), cu - 2)
+        j = np.minimum(y.astype(int), cv - 2)
+        a, b = (x - i)[None, :, None], (y - j)[None, :, None]
+        approx = ((1 - a) * (1 - b) * g[:, j, i] + a * (1 - b) * g[:, j, i + 1]
+                  + (1 - a) * b * g[:, j + 1, i] + a * b * g[:, j + 1, i + 1])
+        out["lod_error"][:, k] = np.linalg.norm(ref - approx, axis=2).max(axis=1) * (1.0 + 2.0 * variation)
     return out
+
+
+def _nested(fine: tuple[int, int], coarse: tuple[int, int]) -> NDArray[np.intp] | None:
+    """Indices of ``coarse``'s (u, v) samples among ``fine``'s (both in
+    :func:`~leafview.deform.surface.grid_uv` order), or None when they are not all among them."""
+    (fu, fv), (cu, cv) = fine, coarse
+    if (fu - 1) % (cu - 1) or (fv - 1) % (cv - 1):
+        return None
+    su, sv = (fu - 1) // (cu - 1), (fv - 1) // (cv - 1)
+    idx = (np.arange(cv)[:, None] * sv * fu + np.arange(cu)[None, :] * su).reshape(-1)
+    fine_uv, coarse_uv = grid_uv(fu, fv), grid_uv(cu, cv)
+    return idx if np.array_equal(fine_uv[idx], coarse_uv) else None
 
 
 def plan_batches(n_leaves: int, max_block_bytes: int, max_groups: int = 65535,
@@ -264,6 +317,9 @@ class SceneRenderer:
         self.grids: tuple[tuple[int, int], ...] = tuple((int(g[0]), int(g[1])) for g in grids)
         if not 1 <= len(self.grids) <= 4:
             raise ValueError("between 1 and 4 levels of detail")
+        # the memory estimate and the context, before any GL object or per-leaf array
+        check_scene(len(scene))
+        ensure_alive(ctx, "uploading a scene")
         self._objects = GLObjects()
         self.batches: list[_SceneBatch] = []
         try:
@@ -271,17 +327,18 @@ class SceneRenderer:
             limit = int(ctx.info["GL_MAX_SHADER_STORAGE_BLOCK_SIZE"])
             if max_block_bytes is not None:
                 limit = min(limit, int(max_block_bytes))
+            self._block_limit = limit
             groups = int(ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])
             self.plan = plan_batches(len(scene), limit, groups)
             self.species_records, table, keys = species_tables(scene)
-            self.cull_rows = species_cull(scene, self.grids)
             self.program = self.resources.leaf_program({"LEAF_INDIRECT": 1, **feature_defines(self.species_records)})
             self.cull = self.resources.programs.compute("scene_cull.comp")
             self.ripples = self._objects.own(self.resources.ripple_pass())
             self.ripples.update(keys)
             self.jitter = self._objects.own(JitterTable(ctx, table))
-            self.species_ssbo = self._objects.own(ctx.buffer(self.cull_rows.tobytes()))
             self.frame = self._objects.own(FrameUniforms(ctx))
+            self.cull_rows = self._species_cull(self.species_records)
+            self.species_ssbo = self._objects.own(ctx.buffer(self.cull_rows.tobytes()))
             # every level's grid in one vertex and one index buffer
             uvs, idx = [], []
             self.first_index: list[int] = []
@@ -301,6 +358,7 @@ class SceneRenderer:
             self.ibo = self._objects.own(ctx.buffer(np.concatenate(idx).astype(np.uint32).tobytes()))
             self.stems = self._make_stems(scene.stems)
             for start, stop in self.plan:
+                ensure_alive(ctx, f"uploading leaves {start:,}..{stop:,} of {len(scene):,}")
                 self.batches.append(_SceneBatch(self, start, stop))
                 err = ctx.error
                 if err != "GL_NO_ERROR":
@@ -311,6 +369,53 @@ class SceneRenderer:
         except BaseException:
             self.release()
             raise
+
+    def _species_cull(self, records: NDArray[Any], chunk: int = _CULL_CHUNK) -> NDArray[Any]:
+        """:func:`species_cull` of the species ``records`` from the points this renderer's vertex
+        shader computes: identical records are captured once, the others in chunks of ``chunk``
+        (one prepare dispatch and one instanced capture per level each), so a leaf set with a
+        species per leaf costs a few GPU passes, not a numpy evaluation per leaf."""
+        ctx = self.ctx
+        raw = np.ascontiguousarray(records).view(np.dtype((np.void, records.dtype.itemsize))).reshape(-1)
+        _, first, inverse = np.unique(raw, return_index=True, return_inverse=True)
+        unique = np.ascontiguousarray(records[first])
+        # a coarser level whose samples are among the finest level's (the default grids nest) is
+        # read out of the finest capture; only the others are captured themselves
+        subsets = [_nested(self.grids[0], g) for g in self.grids]
+        captured = [k for k, sub in enumerate(subsets) if sub is None or k == 0]
+        per = [self.grids[k][0] * self.grids[k][1] for k in captured]
+        chunk = max(1, min(chunk, self._block_limit // LEAF_BLOCK.nbytes,
+                           MAX_RESOURCE_BYTES // capture_bytes(sum(per))))
+        points: list[list[NDArray[np.float32]]] = [[] for _ in self.grids]
+        self._bind_tables()
+        for start in range(0, len(unique), chunk):
+            part = unique[start:start + chunk]
+            n = len(part)
+            ensure_alive(ctx, "measuring the species of a scene")
+            local = GLObjects()
+            try:
+                rows = local.own(ctx.buffer(part.tobytes()))
+                self.resources.prepare.run(rows, n)
+                ids = local.own(ctx.buffer(np.arange(n, dtype=np.uint32).tobytes()))
+                with self.resources.capture.recording(n * sum(per)) as rec:
+                    for k in captured:
+                        g = self.resources.grid(*self.grids[k])
+                        vao = local.own(ctx.vertex_array(self.program, [(g.vbo, "2f", "in_uv"),
+                                                                        (ids, "1u/i", "in_leaf")]))
+                        rows.bind_to_storage_buffer(LEAVES_BINDING)
+                        rec.add(vao, g.vertices, instances=n)
+                    pos, _ = rec.read()
+            finally:
+                local.release()
+            offset = 0
+            for k, nverts in zip(captured, per):
+                points[k].append(pos[offset:offset + n * nverts].reshape(n, nverts, 3))
+                offset += n * nverts
+            for k, sub in enumerate(subsets):
+                if k not in captured and sub is not None:
+                    points[k].append(points[0][-1][:, sub])
+        rows_out = cull_rows_from_points([np.concatenate(p) for p in points], self.grids, self.scene.spec.variation)
+        return rows_out[inverse.reshape(-1)]
 
     def _make_stems(self, stems: Any) -> moderngl.VertexArray | None:
         if stems is None or len(stems[2]) == 0:
@@ -370,19 +475,23 @@ class SceneRenderer:
         self.ripples.bind()
 
     def draw(self, settings: CullSettings = CullSettings()) -> None:
-        """Cull and draw every batch (and the stems) into the bound framebuffer."""
+        """Cull and draw every batch (and the stems) into the bound framebuffer. A context
+        released or lost before or between batches raises :class:`~leafview.errors.GLContextLost`."""
+        ensure_alive(self.ctx, "drawing a scene")
         self.ctx.enable_only(moderngl.DEPTH_TEST)
         self._bind_tables()
         if self.stems is not None:
             self.stems.render(moderngl.TRIANGLES)
         self._set_cull_uniforms(settings)
-        for batch in self.batches:
+        for i, batch in enumerate(self.batches):
+            ensure_alive(self.ctx, f"drawing batch {i + 1} of {len(self.batches)}")
             self._cull(batch)
             batch.rows.bind_to_storage_buffer(LEAVES_BINDING)
             batch.vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=len(self.grids))
 
     def level_counts(self) -> NDArray[np.int64]:
         """Leaves drawn at each level in the last :meth:`draw` (reads the commands back)."""
+        ensure_alive(self.ctx, "reading the draw commands back")
         total = np.zeros(len(self.grids), np.int64)
         for batch in self.batches:
             total += np.frombuffer(batch.commands.read(), DRAW_COMMAND_DTYPE)["instance_count"]
@@ -390,6 +499,7 @@ class SceneRenderer:
 
     def levels(self) -> NDArray[np.int32]:
         """Each leaf's level in the last :meth:`draw` (-1: culled), read back from the lists."""
+        ensure_alive(self.ctx, "reading the visible lists back")
         out = np.full(len(self.scene), -1, np.int32)
         for batch in self.batches:
             counts = np.frombuffer(batch.commands.read(), DRAW_COMMAND_DTYPE)["instance_count"]
@@ -442,6 +552,7 @@ class SceneRenderer:
         shared resources, resolved when multisampled)."""
         ctx = self.ctx
         size = (int(size[0]), int(size[1]))
+        ensure_alive(ctx, "rendering a scene")
         target = self.resources.target(size, min(int(samples), int(ctx.max_samples)))
         target.use()
         ctx.viewport = (0, 0, *size)

@@ -13,6 +13,8 @@ import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
+from leafview.gpu.limits import ContextLimits, check_image, context_alive
+
 __all__ = ["RenderTarget", "OffscreenTarget", "read_rgba", "unpremultiply"]
 
 
@@ -53,6 +55,8 @@ class RenderTarget:
         self.samples, self.linear = int(samples), bool(linear)
         dtype = "f4" if linear else "f1"
         self._objects: list[Any] = []
+        # sides vs the context's limits, attachment bytes and memory, before any GL object
+        check_image(ContextLimits.of(ctx), self.size, self.samples, linear=self.linear, copies=1)
         try:
             color = self._own(ctx.renderbuffer(self.size, 4, dtype=dtype))
             depth = self._own(ctx.depth_renderbuffer(self.size))
@@ -97,7 +101,8 @@ class RenderTarget:
         return np.ascontiguousarray(image) if copy else image
 
     def release(self) -> None:
-        if self._objects:
+        """Release the framebuffers (idempotent; safe after the context was released)."""
+        if self._objects and context_alive(self.ctx):
             self.ctx.detect_framebuffer(0).use()
         while self._objects:
             self._objects.pop().release()
