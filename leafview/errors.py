@@ -3,7 +3,9 @@
 Every error leafview raises on purpose derives from :class:`LeafviewError`, so a caller can
 catch them all in one place. The command line maps them to exit codes: bad input
 (:class:`ParamError`, :class:`UsageError` and its subclasses) exits 2 and writes nothing; a
-runtime failure (:class:`GLUnavailable`, :class:`ShaderError`, :class:`ImageWriteError`) exits 1.
+runtime failure (:class:`GLUnavailable`, :class:`ShaderError`, :class:`ImageWriteError`,
+:class:`OutputError`) exits 1; an output path that cannot name a file (:class:`OutputPathError`)
+exits 2.
 
 The subclasses keep the built-in base they always had (``ValueError`` for bad values,
 ``RuntimeError`` for failures), so ``except ValueError`` in user code keeps working.
@@ -12,7 +14,7 @@ The subclasses keep the built-in base they always had (``ValueError`` for bad va
 from __future__ import annotations
 
 __all__ = ["LeafviewError", "ParamError", "UsageError", "ExportError", "NonFiniteMesh", "SceneLimitError",
-           "GLUnavailable", "ShaderError", "ImageWriteError"]
+           "GpuLimitError", "GLUnavailable", "GLContextLost", "ShaderError", "ImageWriteError"]
 
 
 class LeafviewError(Exception):
@@ -54,8 +56,19 @@ class SceneLimitError(LeafviewError, ValueError):
     """A scene that cannot be drawn within this context's limits; the message names the limit."""
 
 
+class GpuLimitError(ParamError):
+    """A size or count beyond what the OpenGL context or this machine's memory allows (image
+    size, grid, instances, leaves, bytes to allocate). ``path`` names the parameter, the message
+    the limit and the value asked for; raised before any GL object is created."""
+
+
 class GLUnavailable(LeafviewError, RuntimeError):
     """No usable OpenGL 4.5 context could be created; the message says what to install."""
+
+
+class GLContextLost(LeafviewError, RuntimeError):
+    """The OpenGL context was released or lost while leafview still used it (for example between
+    the batches of a scene), or GL reported an error no check could have prevented."""
 
 
 class ShaderError(LeafviewError, RuntimeError):
@@ -74,3 +87,26 @@ class ShaderError(LeafviewError, RuntimeError):
 
 class ImageWriteError(LeafviewError, RuntimeError):
     """OpenImageIO could not write the file (the message carries OIIO's own error text)."""
+
+
+class OutputError(LeafviewError, OSError):
+    """A file could not be written because of the environment: no space left, no permission, a
+    read-only file system, an I/O error. The message is one line naming the file; ``path`` is
+    that file and ``errno`` the error number when known. Nothing partial is left behind, and an
+    older file at ``path`` is kept whole. ``leafview`` exits 1.
+
+    It is an ``OSError`` too, so ``except OSError`` around a save keeps working."""
+
+    def __init__(self, message: str, path: str | None = None, errno: int | None = None) -> None:
+        super().__init__(message)
+        self.message, self.path = message, path
+        self.errno, self.filename = errno, path
+
+    def __str__(self) -> str:
+        return self.message
+
+
+class OutputPathError(OutputError, UsageError):
+    """An output path that cannot name a file to write: its folder is a file, a name is too long,
+    or the path is a directory, a symbolic link, a device or a pipe (leafview replaces regular
+    files only). Bad input: ``leafview`` exits 2 and writes nothing."""

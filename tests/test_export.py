@@ -130,6 +130,7 @@ def test_writers_refuse_nonfinite_meshes(tmp_path, presets):
 # -- glTF ------------------------------------------------------------------------------------
 @pytest.mark.parametrize("suffix", [".glb", ".gltf"])
 @pytest.mark.parametrize("back_faces", ["primitive", "double-sided"])
+@pytest.mark.usefixtures("gltf_validator")   # installs the Khronos validator on first use
 def test_gltf_passes_khronos_validator(gl, presets, tmp_path, suffix, back_faces):
     for name in SAMPLE[:2] if back_faces == "double-sided" else SAMPLE:
         path = export_leaf(presets[name], tmp_path / f"{name}{suffix}", renderer=gl, back_faces=back_faces)

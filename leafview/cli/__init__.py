@@ -5,7 +5,8 @@ One module per sub-command (listed in :data:`COMMANDS`), each with ``add_argumen
 module is imported, so ``leafview --help`` loads no OpenGL, window or UI library.
 
 Exit codes: 0 success, 2 bad input (arguments, presets, paths), 1 a runtime failure (no OpenGL,
-an image that could not be written). A failing run writes no file.
+an image that could not be written, a full disk, no permission), 128 + N after signal N (SIGINT
+130, SIGTERM 143) while writing. A failing run writes no file.
 """
 
 from __future__ import annotations
@@ -16,8 +17,17 @@ import sys
 from collections.abc import Sequence
 
 from leafview._version import __version__
+from leafview.atomic import Terminated
 from leafview.cli.args import EXIT_FAILURE, EXIT_INTERRUPTED, EXIT_USAGE
-from leafview.errors import GLUnavailable, ImageWriteError, ParamError, UsageError
+from leafview.errors import (
+    GLContextLost,
+    GLUnavailable,
+    ImageWriteError,
+    OutputError,
+    ParamError,
+    SceneLimitError,
+    UsageError,
+)
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
@@ -63,13 +73,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         code: int = importlib.import_module(COMMANDS[args.command][0]).run(args)
         return code
-    except (UsageError, ParamError) as exc:
+    except (UsageError, ParamError, SceneLimitError) as exc:
         print(f"leafview {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("leafview: interrupted; no partial files were left", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (GLUnavailable, ImageWriteError) as exc:   # a message, not a traceback
+    except Terminated as exc:   # SIGTERM/SIGHUP while writing: temporary files removed
+        print(f"leafview: {exc}; no partial files were left", file=sys.stderr)
+        return int(exc.code) if isinstance(exc.code, int) else EXIT_FAILURE
+    except (GLUnavailable, GLContextLost, ImageWriteError, OutputError) as exc:   # a message, not a traceback
         print(f"leafview {args.command}: {exc}", file=sys.stderr)
         return EXIT_FAILURE
 

@@ -16,28 +16,39 @@ from typing import Any
 
 from tqdm import tqdm
 
+from leafview.atomic import UniqueNames, check_folder, check_target
 from leafview.core.io import load_leaves
+from leafview.core.limits import MAX_GRID, MAX_IMAGE_SIDE, parse_count
 from leafview.core.params import LeafParams
 from leafview.errors import UsageError
 from leafview.resources import builtin_presets, resolve_preset
 from leafview.scene.camera import VIEWS
 
-__all__ = ["EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_INTERRUPTED", "VIEWS", "int_in_range", "int_pair",
+__all__ = ["EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_INTERRUPTED", "VIEWS", "count", "int_in_range", "int_pair",
            "pixels", "image_size", "window_size", "grid", "builtin_names", "expand_presets", "preset_file",
-           "load_leaf_files", "refuse_directory", "output_directory", "unique_names", "report", "progress_bar"]
+           "load_leaf_files", "refuse_directory", "output_directory", "output_names", "report", "progress_bar"]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 EXIT_INTERRUPTED = 130   # Ctrl-C, as a shell reports SIGINT
 
 
 # -- argument types -----------------------------------------------------------------------------
+def count(text: str, *, lo: int, hi: int, what: str, name: str | None = None) -> int:
+    """A count for argparse (``10_000``, ``1e6``), in lo..hi (:mod:`leafview.core.limits`); never an
+    OverflowError (``1e400``) or a 5,000-digit conversion."""
+    try:
+        return parse_count(text, lo, hi, what, name)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def int_in_range(text: str, *, lo: int, hi: int | None, what: str, name: str) -> int:
     """Parse a whole number in lo..hi (no upper bound when ``hi`` is None) for argparse:
     ``what`` names the unit in the type error, ``name`` the option in the range error."""
     try:
-        n = int(text)
+        n = int(text) if len(text) <= 40 else int("x")
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of {what}, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected a whole number of {what}, got {text[:40]!r}") from None
     if n < lo or (hi is not None and n > hi):
         bound = f"between {lo} and {hi}" if hi is not None else f"at least {lo}"
         raise argparse.ArgumentTypeError(f"{name} must be {bound} {what}, got {n}")
@@ -47,9 +58,11 @@ def int_in_range(text: str, *, lo: int, hi: int | None, what: str, name: str) ->
 def int_pair(text: str, *, lo: int, hi: int, what: str, example: str) -> tuple[int, int]:
     """Parse ``AxB`` (two whole numbers, each in lo..hi) for argparse, with a clear message."""
     try:
+        if len(text) > 40:
+            raise ValueError(text)
         a, b = (int(x) for x in text.lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected {what} such as {example}, got {text!r}") from None
+        raise argparse.ArgumentTypeError(f"expected {what} such as {example}, got {text[:40]!r}") from None
     if not (lo <= a <= hi and lo <= b <= hi):
         raise argparse.ArgumentTypeError(f"{a}x{b} outside {lo}..{hi} per side")
     return a, b
@@ -57,22 +70,22 @@ def int_pair(text: str, *, lo: int, hi: int, what: str, example: str) -> tuple[i
 
 def pixels(text: str) -> int:
     """``--size N`` of square images: 8..8192 pixels."""
-    return int_in_range(text, lo=8, hi=8192, what="pixels", name="size")
+    return int_in_range(text, lo=8, hi=MAX_IMAGE_SIDE, what="pixels", name="size")
 
 
 def image_size(text: str) -> tuple[int, int]:
     """``--size WxH`` of an offscreen image: each side 16..8192."""
-    return int_pair(text, lo=16, hi=8192, what="WxH", example="1280x720")
+    return int_pair(text, lo=16, hi=MAX_IMAGE_SIDE, what="WxH", example="1280x720")
 
 
 def window_size(text: str) -> tuple[int, int]:
     """``--size WxH`` of a window: each side 64..8192."""
-    return int_pair(text, lo=64, hi=8192, what="WIDTHxHEIGHT", example="1280x800")
+    return int_pair(text, lo=64, hi=MAX_IMAGE_SIDE, what="WIDTHxHEIGHT", example="1280x800")
 
 
 def grid(text: str) -> tuple[int, int]:
     """``NUxNV`` samples across and along the blade: each 2..1025."""
-    return int_pair(text, lo=2, hi=1025, what="NUxNV", example="33x65")
+    return int_pair(text, lo=2, hi=MAX_GRID, what="NUxNV", example="33x65")
 
 
 # -- presets ------------------------------------------------------------------------------------
@@ -116,25 +129,33 @@ def load_leaf_files(paths: Sequence[Path]) -> list[LeafParams]:
 
 
 # -- outputs ------------------------------------------------------------------------------------
-def refuse_directory(flag: str, path: str | Path) -> None:
-    """UsageError when the output file ``path`` given with ``flag`` is an existing directory."""
-    if Path(path).is_dir():
-        raise UsageError(f"{flag} {path} is a directory; give a file name")
+def refuse_directory(flag: str, path: str | Path) -> Path:
+    """Check the output file ``path`` given with ``flag`` before any work (see
+    :func:`leafview.atomic.check_target`): UsageError when it is a directory, a symbolic link, a
+    device or pipe, when a folder above it is a file or a name is too long; OutputError (exit 1)
+    when its folder is not writable. Returns the path."""
+    return check_target(path, flag)   # "-o PATH is a directory; give a file name", links, devices, ...
 
 
-def output_directory(path: Path) -> Path:
-    """``-o DIR``: UsageError when ``path`` exists and is not a directory."""
-    if path.exists() and not path.is_dir():
-        raise UsageError(f"-o {path} exists and is not a directory")
-    return path
+def output_directory(path: Path, flag: str = "-o") -> Path:
+    """``-o DIR``: UsageError when ``path`` exists and is not a directory (or a folder above it
+    is a file), OutputError when it cannot be written; stale temporary files in it are removed."""
+    return check_folder(path, flag)
 
 
-def unique_names(names: Sequence[str], what: str) -> None:
-    """UsageError when two leaves written into one directory share a name (``what``: "images",
-    "files") and so would overwrite each other."""
-    if len(set(names)) != len(names):
-        dup = sorted({n for n in names if names.count(n) > 1})
-        raise UsageError(f"several presets are named {', '.join(dup)}: their {what} would overwrite each other")
+def output_names(names: Sequence[str], *, fallback: str = "leaf", quiet: bool = False) -> list[str]:
+    """File names (without suffix) for outputs named from input (leaf, species, shape names):
+    each one safe path component (no separators, ``..``, leading dots, control characters,
+    Windows device names; length capped) and unique in the run (``name``, ``name-2``, ...), so
+    nothing is written outside the output folder and nothing overwrites another output. A note
+    on stderr lists the names that changed (unless ``quiet``)."""
+    unique = UniqueNames(fallback=fallback)
+    out = [unique(n) for n in names]
+    changed = [(n, o) for n, o in zip(names, out) if n != o]
+    if changed and not quiet:
+        shown = ", ".join(f"{n!r} -> {o}" for n, o in changed[:5]) + (" ..." if len(changed) > 5 else "")
+        print(f"note: {len(changed)} name(s) changed to safe, unique file names: {shown}", file=sys.stderr)
+    return out
 
 
 # -- reporting ----------------------------------------------------------------------------------

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from leafview.atomic import outputs
 from leafview.cli.args import (
     EXIT_OK,
     expand_presets,
@@ -27,9 +28,9 @@ from leafview.cli.args import (
     int_in_range,
     load_leaf_files,
     output_directory,
+    output_names,
     progress_bar,
     refuse_directory,
-    unique_names,
 )
 from leafview.core.io import read_document, save_leaves, save_params
 from leafview.core.params import LeafParams
@@ -209,8 +210,8 @@ def _run(args: argparse.Namespace) -> int:
         return _run_scene(args, paths[0], started, leaves=leaves)   # a leaf set into one file
     mode, out, fmt = _target(args, len(leaves))
     names = [leaf.name for leaf in leaves]
-    if mode == "dir":
-        unique_names(names, "files")
+    # one safe, unique file name per leaf: never outside -o DIR, never one over another
+    files = output_names(names, quiet=args.quiet) if mode == "dir" else names
     opts = _options(args, fmt)
     common = {"resolution": args.resolution, "backend": args.backend, "length_m": args.length_m}
     if mode == "file":
@@ -224,13 +225,10 @@ def _run(args: argparse.Namespace) -> int:
     written: list[Path] = []
     bar = progress_bar(total=len(leaves), unit="leaf", desc="exporting", quiet=args.quiet)
     try:
-        for leaf, name in zip(leaves, names):
-            written.append(export_leaf(leaf, out / f"{name}{suffix}", **common, **opts))
-            bar.update(1)
-    except BaseException:
-        for p in written:      # a failure leaves no half-finished directory behind
-            p.unlink(missing_ok=True)
-        raise
+        with outputs():        # every file or none: a failure leaves no half-finished directory behind
+            for leaf, name in zip(leaves, files):
+                written.append(export_leaf(leaf, out / f"{name}{suffix}", **common, **opts))
+                bar.update(1)
     finally:
         bar.close()
     if not args.quiet:
@@ -245,6 +243,7 @@ def _run_scene(args: argparse.Namespace, path: Path, started: float,
     fmt = format_of(out)
     if args.format and args.format != out.suffix.lower().lstrip("."):
         raise UsageError(f"-o {out} is a {out.suffix} file but --format {args.format} was given")
+    refuse_directory("-o", out)   # before the scene is built and baked
     scene = build_scene(load_scene(path)) if leaves is None else scene_from_leaves(leaves, name=path.name)
     shapes = len(np.unique(scene.shape_ids)) if len(scene) else 0
     bar = progress_bar(total=shapes, unit="shape", desc="baking", quiet=args.quiet)

@@ -20,17 +20,18 @@ import sys
 import time
 from pathlib import Path
 
-from leafview.atomic import atomic_output
+from leafview.atomic import outputs, write_text
 from leafview.botany.shapes import INSTANCE_TARGET
 from leafview.cli.args import EXIT_OK, VIEWS, output_directory, pixels, progress_bar
 from leafview.core.io import dumps_toml
+from leafview.core.limits import MAX_MORPH_FRAMES
 from leafview.errors import UsageError
 from leafview.export.images import contact_sheet, write_image
 from leafview.gpu.morph import MorphSequence, load_morph_leaf, morph_sequence, parse_ref, render_sequence
 
 __all__ = ["add_arguments", "run", "MAX_FRAMES"]
 
-MAX_FRAMES = 1000
+MAX_FRAMES = MAX_MORPH_FRAMES
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -96,25 +97,23 @@ def run(args: argparse.Namespace) -> int:
     labels = [f"{i:0{width}d}  t={t:.2f}" for i, t in enumerate(seq.t)]
     sheet = contact_sheet(images, labels, columns=min(8, args.frames))
 
-    out.mkdir(parents=True, exist_ok=True)
-    for i, (img, parts) in enumerate(zip(images, seq.parts)):
-        stem = f"frame_{i:0{width}d}"
-        if len(parts) == 1:
-            write_image(out / f"{stem}.png", img, params=parts[0])
-        else:
-            write_image(out / f"{stem}.png", img, description=f"leafview morph frame {i}: asymmetric, "
-                        f"drawn as two one-sided leaves ({stem}.right.toml, {stem}.left.toml with --presets)")
-        if args.presets:
-            names = [f"{stem}.toml"] if len(parts) == 1 else [f"{stem}.right.toml", f"{stem}.left.toml"]
-            for fname, params in zip(names, parts):
-                with atomic_output(out / fname) as tmp:
-                    Path(tmp).write_text(dumps_toml(params), encoding="utf-8")
-    write_image(out / "sheet.png", sheet,
-                description=f"leafview morph {args.source} -> {args.target} ({args.method}, {args.frames} frames)")
     summary = seq.summary() | {"source": args.source, "target": args.target,
                                "refs": [{"spec": parse_ref(r).spec, "weight": parse_ref(r).weight} for r in args.ref]}
-    with atomic_output(out / "morph.json") as tmp:
-        Path(tmp).write_text(json.dumps(summary, indent=1) + "\n", encoding="utf-8")
+    with outputs():   # frames, presets, sheet and morph.json together, or none of them
+        for i, (img, parts) in enumerate(zip(images, seq.parts)):
+            stem = f"frame_{i:0{width}d}"   # file names from the frame number only, never from input
+            if len(parts) == 1:
+                write_image(out / f"{stem}.png", img, params=parts[0])
+            else:
+                write_image(out / f"{stem}.png", img, description=f"leafview morph frame {i}: asymmetric, "
+                            f"drawn as two one-sided leaves ({stem}.right.toml, {stem}.left.toml with --presets)")
+            if args.presets:
+                names = [f"{stem}.toml"] if len(parts) == 1 else [f"{stem}.right.toml", f"{stem}.left.toml"]
+                for fname, params in zip(names, parts):
+                    write_text(out / fname, dumps_toml(params))
+        write_image(out / "sheet.png", sheet,
+                    description=f"leafview morph {args.source} -> {args.target} ({args.method}, {args.frames} frames)")
+        write_text(out / "morph.json", json.dumps(summary, indent=1) + "\n")
 
     s, k = seq.smoothness, seq.keyframe_smoothness
     print(f"wrote {args.frames} frames ({args.size}×{args.size}, {args.view} view), sheet.png and morph.json "

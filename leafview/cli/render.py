@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from leafview._version import __version__
+from leafview.atomic import outputs
 from leafview.cli.args import (
     EXIT_OK,
     VIEWS,
@@ -20,17 +21,18 @@ from leafview.cli.args import (
     grid,
     load_leaf_files,
     output_directory,
+    output_names,
     pixels,
     progress_bar,
     refuse_directory,
     report,
-    unique_names,
 )
 from leafview.core.params import LeafParams
 from leafview.errors import UsageError
 from leafview.export.images import FORMATS, contact_sheet, format_of, write_image
 from leafview.gpu import default_renderer
 from leafview.gpu.renderer import BATCH
+from leafview.scene.camera import check_leaf_framable
 
 __all__ = ["add_arguments", "run"]
 
@@ -79,10 +81,12 @@ def _describe(leaf: LeafParams, args: argparse.Namespace) -> str:
 def run(args: argparse.Namespace) -> int:
     """Render the presets of ``args``; returns the exit code."""
     leaves = load_leaf_files(expand_presets(args.presets))  # validate everything before writing anything
+    for leaf in leaves:
+        check_leaf_framable(leaf)   # finite and within what float32 can frame, or exit 2 naming the leaf
     mode, out, fmt = _plan(args, len(leaves))
     names = [leaf.name for leaf in leaves]
-    if mode == "dir":
-        unique_names(names, "images")
+    # one safe, unique file name per leaf: never outside -o DIR, never one over another
+    files = output_names(names, quiet=args.quiet) if mode == "dir" else names
 
     renderer = default_renderer()
     kwargs = {"grid": args.grid} if args.grid else {}
@@ -103,25 +107,24 @@ def run(args: argparse.Namespace) -> int:
     written: list[Path] = []
     images: list[Any] = []
     try:
-        for start in range(0, len(leaves), BATCH):
-            chunk = leaves[start:start + BATCH]
-            rendered = draw_all(chunk)
+        with outputs():   # every image of the batch, or none: a failure leaves no half-finished directory
+            for start in range(0, len(leaves), BATCH):
+                chunk = leaves[start:start + BATCH]
+                rendered = draw_all(chunk)
+                if mode == "sheet":
+                    images += rendered
+                else:
+                    for leaf, name, image in zip(chunk, files[start:start + BATCH], rendered):
+                        written.append(write_image(out / f"{name}{FORMATS[fmt]}", image, params=leaf,
+                                                   description=_describe(leaf, args)))
+                bar.update(len(chunk))
             if mode == "sheet":
-                images += rendered
-            else:
-                for leaf, name, image in zip(chunk, names[start:start + BATCH], rendered):
-                    written.append(write_image(out / f"{name}{FORMATS[fmt]}", image, params=leaf,
-                                               description=_describe(leaf, args)))
-            bar.update(len(chunk))
-    except BaseException:
-        for path in written:  # a failed batch leaves no half-finished directory behind
-            path.unlink(missing_ok=True)
-        raise
+                write_image(out, contact_sheet(images, names),
+                            description=f"leafview contact sheet: {', '.join(names)}")
     finally:
         bar.close()
     seconds = time.perf_counter() - started
     if mode == "sheet":
-        write_image(out, contact_sheet(images, names), description=f"leafview contact sheet: {', '.join(names)}")
         report(args, f"wrote {out}: contact sheet of {len(leaves)} leaves ({args.view} view) in {seconds:.1f} s")
     else:
         report(args, f"wrote {len(written)} {fmt} thumbnails ({args.size}×{args.size}, {args.view} view) "

@@ -11,17 +11,21 @@ Examples::
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 from typing import Any
 
 from leafview.app.scene_view import view_scene
-from leafview.cli.args import EXIT_OK, builtin_names, image_size, progress_bar, refuse_directory
+from leafview.atomic import outputs
+from leafview.cli.args import EXIT_OK, builtin_names, count, image_size, progress_bar, refuse_directory
 from leafview.core.compact import is_compact
 from leafview.core.io import leaves_from_document, read_document, save_leaves
+from leafview.core.limits import MAX_PLANTS, MAX_VIEW_FRAMES
 from leafview.core.params import LeafParams
 from leafview.errors import UsageError
 from leafview.export import export_scene
+from leafview.export import format_of as mesh_format
 from leafview.export.images import format_of, write_image
 from leafview.gpu import default_renderer
 from leafview.gpu.scene import LOD_GRIDS, CullSettings, SceneRenderer
@@ -42,13 +46,18 @@ __all__ = ["add_arguments", "run", "spec_from_args"]
 
 
 def _count(text: str) -> int:
-    try:
-        n = int(float(text)) if "e" in text.lower() else int(text.replace("_", ""))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number of leaves, got {text!r}") from None
-    if not 1 <= n <= MAX_LEAVES:
-        raise argparse.ArgumentTypeError(f"leaf count must be in 1..{MAX_LEAVES:,}, got {n:,}")
-    return n
+    """``--leaves``: 1..MAX_LEAVES (``1e6`` and ``10_000`` accepted; ``1e400`` refused, not an overflow)."""
+    return count(text, lo=1, hi=MAX_LEAVES, what="leaves", name="leaf count")
+
+
+def _plants(text: str) -> int:
+    """``--plants``: 1..MAX_PLANTS."""
+    return count(text, lo=1, hi=MAX_PLANTS, what="plants")
+
+
+def _frames(text: str) -> int:
+    """``--frames`` of a scripted view: 1..MAX_VIEW_FRAMES."""
+    return count(text, lo=1, hi=MAX_VIEW_FRAMES, what="frames")
 
 
 def _fraction(text: str) -> float:
@@ -73,7 +82,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--species", help="comma-separated presets (names or files), e.g. ovate,lanceolate")
     p.add_argument("--layout", choices=LAYOUTS, help="one plant, a field of plants or a hedge (default field)")
     p.add_argument("--seed", type=int, help="random seed (default 0): the same seed gives the same scene")
-    p.add_argument("--plants", type=int, help="number of plants (default: from the leaf count)")
+    p.add_argument("--plants", type=_plants, help=f"number of plants, at most {MAX_PLANTS:,} (default: from the "
+                   "leaf count)")
     p.add_argument("--variation", type=_fraction, help="± fraction each leaf's shape varies (default 0.2)")
     p.add_argument("--no-stems", action="store_true", help="leaves only, no branches")
     p.add_argument("-o", "--output", metavar="IMAGE", help="render to this image (.png, .tif, .exr)")
@@ -85,15 +95,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "leaf as a leaf set (.leaves.json)")
     p.add_argument("--export", metavar="FILE", help="bake the scene to a mesh file (.glb, .gltf, .usda, .usdc)")
     p.add_argument("--view", action="store_true", help="open the scene in a window (orbit, culling/LOD panel)")
-    p.add_argument("--frames", type=int, metavar="N", help="with --view: draw N frames, then close (scripted runs)")
+    p.add_argument("--frames", type=_frames, metavar="N", help="with --view: draw N frames, then close (scripted runs)")
     p.add_argument("--screenshot", metavar="IMAGE", help="with --view: write the window after the last frame")
+    p.add_argument("--allow-outside-presets", action="store_true",
+                   help="let the scene file's [[species]] preset paths leave its folder (absolute paths, '..')")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
 
 
 def spec_from_args(args: argparse.Namespace) -> SceneSpec:
     """The scene recipe: the file's (if any) with command-line overrides; raises ParamError."""
     if args.scene:
-        spec = load_scene(args.scene)
+        spec = load_scene(args.scene, allow_outside_presets=args.allow_outside_presets)
     else:
         spec = SceneSpec(species=(LeafParams.load(builtin_presets()["ovate"]),), name="scene")
     changes: dict[str, Any] = {}
@@ -126,9 +138,17 @@ def _check_outputs(args: argparse.Namespace) -> None:
         raise UsageError(f"-o {args.output}: unknown image type (use .png, .tif or .exr)")
     if args.save and Path(args.save).suffix.lower() not in (".toml", ".json"):
         raise UsageError(f"--save {args.save}: use a .toml or .json file name")
-    for flag, value in (("-o", args.output), ("--save", args.save), ("--export", args.export)):
+    if args.export:
+        mesh_format(args.export)
+    seen: dict[str, str] = {}
+    for flag, value in (("-o", args.output), ("--save", args.save), ("--export", args.export),
+                        ("--screenshot", args.screenshot)):
         if value:
-            refuse_directory(flag, value)
+            refuse_directory(flag, value)   # every target checked before any work
+            key = os.path.abspath(value)
+            if key in seen:
+                raise UsageError(f"{seen[key]} and {flag} name the same file {value}")
+            seen[key] = flag
 
 
 def _leaf_set(args: argparse.Namespace) -> list[LeafParams] | None:
@@ -169,8 +189,22 @@ def run(args: argparse.Namespace) -> int:
         spec = spec_from_args(args)   # every input is validated before anything is written
         scene = build_scene(spec)
     t_build = time.perf_counter() - t0
+    wrote: list[str] = []
+    with outputs():   # --save, --export and -o are written together, or none of them
+        _write_outputs(args, scene, spec, leaves is not None, t_build, wrote)
+    for line in wrote:
+        say(line)
+    if args.view:
+        return view_scene(scene, size=args.size, frames=args.frames, screenshot=args.screenshot)
+    return EXIT_OK
+
+
+def _write_outputs(args: argparse.Namespace, scene: Scene, spec: SceneSpec, explicit: bool, t_build: float,
+                   wrote: list[str]) -> None:
+    """--save, --export and -o (staged in the caller's transaction); ``wrote`` gets a line each."""
+    say = wrote.append
     if args.save:
-        _save(scene, spec, args.save, leaves is not None)
+        _save(scene, spec, args.save, explicit)
         say(f"wrote {args.save}: {len(scene):,} leaves, {len(spec.species)} species, seed {spec.seed}")
     if args.export:
         # the grid the scene is drawn with up close, not the single-leaf default (33×65 would
@@ -204,6 +238,3 @@ def run(args: argparse.Namespace) -> int:
             f"{drawn:,} drawn (levels {'/'.join(str(int(c)) for c in counts)}), {tris:,} triangles; "
             f"build {t_build:.1f} s, upload {t_upload:.1f} s, frame {t_frame:.2f} s "
             f"[{ctx.info['GL_RENDERER']}]")
-    if args.view:
-        return view_scene(scene, size=args.size, frames=args.frames, screenshot=args.screenshot)
-    return EXIT_OK

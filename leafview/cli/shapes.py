@@ -17,9 +17,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from leafview.atomic import outputs
 from leafview.botany.lobes import load_lobed_leaf
 from leafview.botany.shapes import fit_info, shape_names, shapes_params
-from leafview.cli.args import EXIT_OK, VIEWS, output_directory, pixels, progress_bar, refuse_directory
+from leafview.cli.args import EXIT_OK, VIEWS, output_directory, output_names, pixels, progress_bar, refuse_directory
 from leafview.core.defaults import DETAIL_GRID
 from leafview.core.params import LeafParams
 from leafview.errors import UsageError
@@ -108,9 +109,10 @@ def _render_shapes(args: argparse.Namespace, names: list[str]) -> int:
         write_image(out, images[0], params=leaves[0])
         print(f"wrote {out} ({args.size}×{args.size}, {args.view} view, {labels[0]})")
     else:
-        out.mkdir(parents=True, exist_ok=True)
-        for img, leaf, label in zip(images, leaves, labels):
-            write_image(out / f"{label.replace('#', '-')}.png", img, params=leaf)
+        files = output_names([label.replace("#", "-") for label in labels], fallback="shape", quiet=args.quiet)
+        with outputs():   # every image or none
+            for img, leaf, name in zip(images, leaves, files):
+                write_image(out / f"{name}.png", img, params=leaf)
         print(f"wrote {len(images)} png images ({args.size}×{args.size}, {args.view} view) to {out}/ "
               f"in {time.perf_counter() - t0:.1f} s")
     return EXIT_OK
@@ -126,6 +128,7 @@ def _render_lobed(args: argparse.Namespace) -> int:
     out = Path(args.output)
     if format_of(out) is None:
         raise UsageError(f"-o {out}: give an image file name (.png, .exr or .tif)")
+    refuse_directory("-o", out)
     t0 = time.perf_counter()
     img = render_lobed(lobed, (args.size, args.size), args.view)
     write_image(out, img, description=f"leafview multilobed leaf: {lobed.name}")

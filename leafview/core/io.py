@@ -10,16 +10,15 @@ from __future__ import annotations
 
 import json
 import os
-import re
-import tomllib
 from pathlib import Path
 from typing import Any
 
 import tomli_w
 
-from leafview.atomic import atomic_output
+from leafview.atomic import write_text
 from leafview.core import compact
 from leafview.core.params import LeafParams, ParamError, parse_params, register_file_io
+from leafview.inputs import parse_json, parse_toml, read_text
 
 __all__ = ["load_params", "save_params", "dumps_toml", "read_document", "load_leaves", "save_leaves",
            "leaves_from_document", "is_compact_path"]
@@ -35,40 +34,15 @@ def _format_of(path: Path) -> str:
 
 
 def read_document(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """Parse a preset file into a dict, reporting syntax errors with ``file:line:col``."""
+    """Parse a preset file into a dict through :mod:`leafview.inputs` (regular files only, size,
+    nesting and number limits), reporting syntax errors with ``file:line:col``."""
     p = Path(path)
     fmt = _format_of(p)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ParamError("", "no such file", str(p)) from None
-    except IsADirectoryError:
-        raise ParamError("", "is a directory, expected a preset file", str(p)) from None
-    except UnicodeDecodeError as exc:
-        raise ParamError("", f"not UTF-8 text ({exc.reason} at byte {exc.start})", str(p)) from None
-    except OSError as exc:
-        raise ParamError("", f"cannot read: {exc.strerror}", str(p)) from None
+    text = read_text(p)
     if not text.strip():
         raise ParamError("", "empty file: expected 'schema' and a [shape] table", str(p))
-    if fmt == "toml":
-        try:
-            return tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            line, col = _toml_position(str(exc))
-            msg = str(exc).split(" (at ")[0]
-            raise ParamError("", f"TOML syntax error: {msg}", f"{p}:{line}:{col}") from None
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ParamError("", f"JSON syntax error: {exc.msg}", f"{p}:{exc.lineno}:{exc.colno}") from None
+    data: dict[str, Any] = parse_toml(text, str(p)) if fmt == "toml" else parse_json(text, str(p))
     return data
-
-
-def _toml_position(message: str) -> tuple[int, int]:
-    # tomllib reports "... (at line L, column C)" or "(at end of document)"
-
-    m = re.search(r"line (\d+), column (\d+)", message)
-    return (int(m.group(1)), int(m.group(2))) if m else (0, 0)
 
 
 def _stem(p: Path) -> str:
@@ -129,8 +103,7 @@ def save_leaves(leaves: list[LeafParams], path: str | os.PathLike[str], *, digit
     if not leaves:
         raise ParamError("leaves", "nothing to write: the leaf set is empty", str(p))
     text = compact.dumps_leaves(leaves, digits=digits) + "\n"
-    with atomic_output(p) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+    write_text(p, text)   # checked target, atomic rename, every byte on the disk
 
 
 def dumps_toml(params: LeafParams) -> str:
@@ -149,8 +122,7 @@ def save_params(params: LeafParams, path: str | os.PathLike[str], *, digits: int
         raise ParamError("digits", f"only the compact form (.leaf.json) rounds numbers, not {p.name}", str(p))
     else:
         text = dumps_toml(params) if fmt == "toml" else json.dumps(params.to_dict(), indent=2) + "\n"
-    with atomic_output(p) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+    write_text(p, text)   # checked target, atomic rename, every byte on the disk
 
 
 class _LeafFiles:

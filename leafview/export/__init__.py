@@ -2,8 +2,9 @@
 
 :func:`export_leaf` and :func:`export_scene` bake the leaves (:mod:`.mesh`), group them by shape
 (:mod:`.scene`) and pick the writer from the file suffix (:mod:`.gltf`, :mod:`.objply`,
-:mod:`.usd`). Every option is checked before anything is baked, every file is written atomically
-(a failure leaves no file) and non-finite vertices are refused. ``docs/export.md`` has the
+:mod:`.usd`). Every option is checked before anything is baked, every file is written through
+:mod:`leafview.atomic` (target checked before the bake, written atomically and verified, a
+failure leaves no file) and non-finite vertices are refused. ``docs/export.md`` has the
 conventions (axes, units, texture coordinates, the two leaf sides).
 """
 
@@ -15,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from leafview.atomic import check_target
 from leafview.core.params import LeafParams
 from leafview.errors import UsageError
 from leafview.export.gltf import BACK_FACES, INSTANCING_MODES, write_gltf
@@ -32,6 +34,7 @@ from leafview.export.scene import (
     ExportPart,
     ExportScene,
     SceneLike,
+    check_world,
     leaf_scene,
     leaves_scene,
     scene_from,
@@ -118,6 +121,7 @@ def write(scene: ExportScene, path: str | Path, **options: Any) -> Path:
     fmt = format_of(path)
     kept = _check_options(fmt, options)
     scene.length_m = _check_length(scene.length_m)
+    check_world(scene)          # every format: finite world-space vertices, or nothing is written
     if fmt in ("glb", "gltf"):
 
         return write_gltf(scene, path, **kept)
@@ -141,6 +145,7 @@ def export_leaf(params: LeafParams, path: str | Path, *, resolution: Sequence[in
     fmt = format_of(path)
     _check_options(fmt, options)
     length_m = _check_length(length_m)
+    check_target(path)   # a folder that cannot take the file fails before the bake
     mesh = bake(params, resolution, backend=backend, renderer=renderer)
     return write(leaf_scene(params, mesh, length_m=length_m), path, **options)
 
@@ -151,6 +156,7 @@ def export_leaves(leaves: Sequence[LeafParams], path: str | Path, *, resolution:
     """Several leaves, each at its own transform, into one file."""
     fmt = format_of(path)
     _check_options(fmt, options)
+    check_target(path)
     scene = leaves_scene(leaves, resolution, backend=backend, renderer=renderer, length_m=_check_length(length_m),
                          progress=progress, name=Path(path).stem)
     return write(scene, path, **options)
@@ -169,6 +175,7 @@ def export_scene(scene: SceneLike, path: str | Path, *, resolution: Sequence[int
     _check_options(fmt, options)
     if fmt == "glb":
         _check_glb_size(scene, resolution)
+    check_target(path)
     export = scene_from(scene, resolution, backend=backend, renderer=renderer, length_m=_check_length(length_m),
                         progress=progress, name=name or Path(path).stem)
     return write(export, path, **options)

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leafview._version import __version__
-from leafview.atomic import atomic_output
+from leafview.atomic import check_target, write_bytes
 from leafview.errors import UsageError
 from leafview.export.mesh import LeafMesh, check_mesh
 from leafview.export.scene import BARK, TRS, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs
@@ -273,6 +273,7 @@ def write_gltf(scene: ExportScene, path: str | Path, **options: Any) -> Path:
     suffix = path.suffix.lower()
     if suffix not in (".glb", ".gltf"):
         raise UsageError(f"{path}: a glTF file ends in .glb or .gltf")
+    check_target(path)   # before building the document
     doc, blob = gltf_document(scene, **options)
     if suffix == ".glb":
         data = _glb(doc, blob)
@@ -280,6 +281,5 @@ def write_gltf(scene: ExportScene, path: str | Path, **options: Any) -> Path:
         if blob:
             doc["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(blob).decode("ascii")
         data = (json.dumps(doc, indent=1, ensure_ascii=False) + "\n").encode("utf-8")
-    with atomic_output(path) as tmp:
-        tmp.write_bytes(data)
+    write_bytes(path, data)   # atomic, every byte checked
     return path

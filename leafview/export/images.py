@@ -1,6 +1,8 @@
 """Writing images through OpenImageIO: PNG/TIFF 8-bit tagged sRGB, EXR half-float linear, the
-leaf's parameters embedded as metadata, every OIIO call checked, output written atomically.
-Also the labelled contact sheet."""
+leaf's parameters embedded as metadata, every OIIO call checked, output written atomically
+through :mod:`leafview.atomic`. OpenImageIO (libpng in particular) can report success for a file
+the disk did not take whole, so every image is read back before it replaces the target: the PNG
+trailer, the header and all the pixels. Also the labelled contact sheet."""
 
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ import OpenImageIO as oiio
 from numpy.typing import NDArray
 
 from leafview._version import __version__
-from leafview.atomic import atomic_output
+from leafview.atomic import atomic_output, brief, check_target, failed_write
 from leafview.core.params import LeafParams
 from leafview.errors import ImageWriteError
 
@@ -32,9 +34,48 @@ def format_of(path: str | os.PathLike[str]) -> str | None:
     return _SUFFIXES.get(Path(path).suffix.lower())
 
 
+_PNG_END = b"\0\0\0\0IEND\xaeB`\x82"   # the last chunk of every complete PNG
+
+
 def _oiio_error(what: str, obj: Any = None) -> ImageWriteError:
     msg = (obj.geterror() if obj is not None else "") or oiio.geterror() or "unknown OpenImageIO error"
     return ImageWriteError(f"{what}: {msg}")
+
+
+def _has_error(obj: Any) -> bool:
+    """OpenImageIO's pending-error flag (a property in its Python bindings, a method in C++)."""
+    flag = getattr(obj, "has_error", False)
+    return bool(flag() if callable(flag) else flag)
+
+
+def _write_failure(target: Path, what: str, detail: str) -> Exception:
+    """OutputError when the file system explains the failure (full, read-only, no permission),
+    else ImageWriteError with OpenImageIO's own text."""
+    detail = detail or "unknown OpenImageIO error"
+    return failed_write(target, f"{what}: {detail}") or ImageWriteError(f"{target}: {what}: {brief(detail, 300)}")
+
+
+def _verify_image(tmp: Path, target: Path, fmt: str, shape: tuple[int, ...]) -> None:
+    """Read the written file back: a complete PNG ends in IEND, and every format must open with
+    the size written and give all its pixels."""
+    if fmt == "png":
+        with open(tmp, "rb") as fh:
+            fh.seek(max(0, os.fstat(fh.fileno()).st_size - len(_PNG_END)))
+            if fh.read() != _PNG_END:
+                raise _write_failure(target, "the written PNG is incomplete", "no IEND chunk at its end")
+    inp = oiio.ImageInput.open(str(tmp))
+    if inp is None:
+        raise _write_failure(target, "the written image cannot be read back", oiio.geterror())
+    try:
+        spec = inp.spec()
+        if (spec.height, spec.width, spec.nchannels) != shape:
+            raise _write_failure(target, "the written image reads back with another size",
+                                 f"{spec.width}x{spec.height}x{spec.nchannels}")
+        back = inp.read_image(spec.format)
+        if back is None or _has_error(inp):
+            raise _write_failure(target, "the written image is incomplete", inp.geterror())
+    finally:
+        inp.close()
 
 
 def write_image(path: str | os.PathLike[str], pixels: NDArray[Any], *, params: LeafParams | None = None,
@@ -48,6 +89,7 @@ def write_image(path: str | os.PathLike[str], pixels: NDArray[Any], *, params: L
     fmt = format_of(target)
     if fmt is None:
         raise ImageWriteError(f"{target}: unknown image type {target.suffix!r} (use .png, .exr or .tif)")
+    check_target(target)   # before any encoding: a one-line error naming the path
     h, w, c = pixels.shape
     if fmt == "exr":
         data = np.ascontiguousarray(pixels, dtype=np.float32)
@@ -70,18 +112,25 @@ def write_image(path: str | os.PathLike[str], pixels: NDArray[Any], *, params: L
         if fmt == "tif":  # TIFF keeps only its own tags: the JSON goes in ImageDescription
             spec.attribute("ImageDescription", text)
 
-    with atomic_output(target) as tmp:
+    kind: str = fmt
+
+    def verify(tmp: Path) -> None:
+        _verify_image(tmp, target, kind, (h, w, c))
+
+    with atomic_output(target, verify=verify) as tmp:
         out = oiio.ImageOutput.create(str(tmp))
         if out is None:
             raise _oiio_error(f"{target}: cannot create a {fmt} writer")
-        try:
-            if not out.open(str(tmp), spec):
-                raise _oiio_error(f"{target}: cannot open for writing", out)
-            if not out.write_image(data):
-                raise _oiio_error(f"{target}: writing pixels failed", out)
-        finally:
-            if not out.close():
-                raise _oiio_error(f"{target}: closing failed", out)
+        failure, detail = "", ""
+        if not out.open(str(tmp), spec):
+            failure, detail = "cannot open for writing", out.geterror()
+        elif not out.write_image(data):
+            failure, detail = "writing pixels failed", out.geterror()
+        closed = out.close()
+        if not failure and (not closed or _has_error(out)):
+            failure, detail = "closing failed", out.geterror()
+        if failure:
+            raise _write_failure(target, failure, detail)
     return target
 
 

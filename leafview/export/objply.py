@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leafview._version import __version__
-from leafview.atomic import atomic_output
+from leafview.atomic import check_target, write_bytes, write_text
 from leafview.errors import UsageError
 from leafview.export.mesh import check_mesh
 from leafview.export.scene import ExportScene
@@ -73,7 +73,7 @@ def _check_finite(name: str, pos: NDArray[np.float64]) -> None:
 
 def write_obj(scene: ExportScene, path: str | Path, *, up: str = "y") -> Path:
     """Write ``scene`` as a Wavefront OBJ (``v``, ``vt``, ``vn``, ``f a/a/a``) atomically."""
-    path = Path(path)
+    path = check_target(path)
     buf = io.StringIO()
     buf.write(f"# leafview {__version__}: {scene.n_leaves} leaves, metres, +{up} up\n")
     base = 1
@@ -86,8 +86,7 @@ def write_obj(scene: ExportScene, path: str | Path, *, up: str = "y") -> Path:
         f = tris.astype(np.int64) + base
         np.savetxt(buf, np.repeat(f, 3, axis=1), fmt="f %d/%d/%d %d/%d/%d %d/%d/%d")
         base += len(pos)
-    with atomic_output(path) as tmp:
-        tmp.write_text(buf.getvalue(), encoding="utf-8")
+    write_text(path, buf.getvalue())   # atomic, every byte checked
     return path
 
 
@@ -97,7 +96,7 @@ def _obj_name(name: str) -> str:
 
 def write_ply(scene: ExportScene, path: str | Path, *, up: str = "y") -> Path:
     """Write ``scene`` as one binary little-endian PLY mesh atomically."""
-    path = Path(path)
+    path = check_target(path)
     chunks = list(world_triangles(scene, up))
     for name, pos, *_ in chunks:
         _check_finite(name, pos)
@@ -123,8 +122,5 @@ def write_ply(scene: ExportScene, path: str | Path, *, up: str = "y") -> Path:
               f"element vertex {len(vert)}\n"
               + "".join(f"property float {k}\n" for k in columns)
               + f"element face {len(face)}\nproperty list uchar uint vertex_indices\nend_header\n")
-    with atomic_output(path) as tmp, open(tmp, "wb") as fh:
-        fh.write(header.encode("ascii"))
-        fh.write(vert.tobytes())
-        fh.write(face.tobytes())
+    write_bytes(path, header.encode("ascii"), vert.tobytes(), face.tobytes())   # atomic, every byte checked
     return path

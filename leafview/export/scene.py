@@ -22,15 +22,17 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from leafview.core.limits import MAX_WORLD_COORD
 from leafview.core.params import LeafParams, Material
-from leafview.errors import UsageError
-from leafview.export.mesh import DEFAULT_RESOLUTION, LeafMesh, bake_many
+from leafview.errors import NonFiniteMesh, UsageError
+from leafview.export.mesh import DEFAULT_RESOLUTION, LeafMesh, bake_many, check_mesh
 from leafview.gpu import LeafRenderer
 
 __all__ = [
     "BARK",
     "TRS",
     "TRS_TOLERANCE",
+    "check_world",
     "ExportPart",
     "ExportScene",
     "SceneLike",
@@ -189,6 +191,37 @@ def parts_trs(parts: Sequence[ExportPart]) -> list[TRS]:
         out.append((t[at:at + k], q[at:at + k], s[at:at + k], err[at:at + k]))
         at += k
     return out
+
+
+# -- the world-space check every writer relies on ---------------------------------------------
+def check_world(scene: ExportScene) -> None:
+    """Refuse a scene whose world-space vertices are not finite or do not fit float32 (what every
+    format stores): each part's mesh must be finite (:func:`leafview.export.mesh.check_mesh`) and
+    every copy's matrix must keep the mesh's bounding box within ±MAX_WORLD_COORD. Raises
+    :class:`~leafview.errors.NonFiniteMesh` naming the leaf and the field (``transform.translation``
+    or ``transform.scale``/``rotation``); nothing is written."""
+    for part in scene.parts:
+        label = part.name or part.mesh.name or "leaf"
+        mats = np.asarray(part.matrices, dtype=np.float64).reshape(-1, 4, 4)
+        if not len(mats) or not part.mesh.n_vertices:
+            continue
+        if not np.isfinite(mats).all():
+            raise NonFiniteMesh(f"{label}: non-finite transform matrix; nothing was written")
+        check_mesh(part.mesh)       # leaf space: finite vertices, normals, texture coordinates
+        lo, hi = (np.asarray(b, np.float64) for b in part.mesh.bounds())
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        with np.errstate(over="ignore", invalid="ignore"):
+            world = np.einsum("kij,cj->kci", mats[:, :3, :3], corners) + mats[:, None, :3, 3]
+            bad = ~(np.abs(world) <= MAX_WORLD_COORD).all(axis=(1, 2))
+        if bad.any():
+            k = int(np.argmax(bad))
+            ids = np.asarray(part.leaf_ids)
+            which = f" (leaf {int(ids[k])})" if len(ids) > k and len(mats) > 1 else ""
+            t = mats[k, :3, 3]
+            field = ("transform.translation" if not (np.abs(t) <= MAX_WORLD_COORD / 2).all()
+                     else "transform.scale/rotation")
+            raise NonFiniteMesh(f"{label}{which}: {field} puts its vertices outside the finite float32 range "
+                                f"(|x| > {MAX_WORLD_COORD:.1e}); nothing was written")
 
 
 # -- building export scenes ------------------------------------------------------------------

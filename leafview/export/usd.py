@@ -36,8 +36,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leafview._version import __version__
-from leafview.atomic import atomic_output
-from leafview.errors import UsageError
+from leafview.atomic import atomic_output, brief, check_target, failed_write
+from leafview.errors import OutputError, UsageError
 from leafview.export.gltf import BACK_FACES
 from leafview.export.mesh import LeafMesh, check_mesh
 from leafview.export.scene import BARK, TRS, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs
@@ -251,9 +251,16 @@ def write_usd(scene: ExportScene, path: str | Path, *, back_faces: str = "primit
     path = Path(path)
     if path.suffix.lower() not in (".usda", ".usdc", ".usd"):
         raise UsageError(f"{path}: a USD file ends in .usda, .usdc or .usd")
+    check_target(path)
     with atomic_output(path) as tmp:
         layer = usd_layer(scene, tmp, back_faces=back_faces)
-        if not layer.Save():
-            raise OSError(f"{path}: USD could not save the layer")
-        del layer
+        try:
+            saved, detail = bool(layer.Save()), ""
+        except RuntimeError as exc:        # pxr.Tf.ErrorException: USD's own writer failed
+            saved, detail = False, brief(str(exc))
+        finally:
+            del layer
+        if not saved:
+            raise failed_write(path, f"USD: {detail or 'the layer was not saved'}") or OutputError(
+                f"cannot write {path}: USD could not save the layer{': ' + detail if detail else ''}", str(path))
     return path

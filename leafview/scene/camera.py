@@ -18,6 +18,12 @@ Views:
     Perspective from azimuth 35° (towards +x from the front) and 50° elevation.
 ``side``
     Perspective from +x, 15° above the leaf plane: shows droop, twist and rippled margins.
+
+What can be framed. The GPU draws in float32, which resolves about 7 significant digits, so
+points whose extent is below :data:`~leafview.core.limits.MIN_FRAME_RATIO` of their distance from
+the origin (a small leaf translated far away) or beyond :data:`MAX_FRAME_REACH` would come out as a
+blank or speckled image: :func:`frame_view` refuses them (:func:`check_framable`), and
+:func:`check_leaf_framable` says which leaf before anything is drawn.
 """
 
 from __future__ import annotations
@@ -29,7 +35,13 @@ import numpy as np
 import pyrr
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["VIEWS", "Camera", "frame_view"]
+from leafview.core.limits import MIN_FRAME_RATIO
+from leafview.core.params import LeafParams, ParamError
+from leafview.deform.surface import evaluate, grid_uv
+
+__all__ = ["VIEWS", "Camera", "frame_view", "check_framable", "check_leaf_framable", "MAX_FRAME_REACH"]
+
+MAX_FRAME_REACH = 1e18     # farthest framed point from the origin (its square must fit float32)
 
 VIEWS = ("top", "front", "three-quarter", "side")
 _ORBITS = {"front": (0.0, 20.0), "three-quarter": (35.0, 50.0), "side": (90.0, 15.0)}
@@ -73,12 +85,48 @@ def frame_view(view: str, points: NDArray[np.float64], size: tuple[int, int]) ->
     """Camera for ``view`` framing ``points`` (world space, (N, 3)) in an image of ``size`` = (w, h)."""
     if view not in VIEWS:
         raise ValueError(f"unknown view {view!r} (choose from {', '.join(VIEWS)})")
+    check_framable(points)
     w, h = size
     lo, hi = points.min(axis=0), points.max(axis=0)
     if view == "top":
         return _top(lo, hi, w, h)
     az, el = _ORBITS[view]
     return _orbit(points, lo, hi, w, h, az, el)
+
+
+def check_framable(points: ArrayLike, what: str = "the geometry", path: str = "transform") -> None:
+    """ParamError (at ``path``, naming ``what``) unless the world-space ``points`` are finite and
+    can be framed in float32 (see the module docstring)."""
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if pts.size == 0:
+        raise ParamError(path, f"{what}: nothing to frame")
+    if not np.isfinite(pts).all():
+        raise ParamError(path, f"{what}: world-space geometry is not finite; it cannot be drawn")
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    extent = float(np.max(hi - lo))
+    reach = float(np.max(np.maximum(np.abs(lo), np.abs(hi))))
+    if reach > MAX_FRAME_REACH:
+        raise ParamError(path, f"{what}: reaches {reach:.3g} from the origin, beyond the {MAX_FRAME_REACH:.0e} "
+                               "that 32-bit rendering can frame")
+    if not extent > reach * MIN_FRAME_RATIO:
+        raise ParamError(path, f"{what}: spans {extent:.3g} at {reach:.3g} from the origin, too small for 32-bit "
+                               f"rendering to resolve (at least {MIN_FRAME_RATIO:g} of the distance): move it "
+                               "nearer the origin or scale it up")
+
+
+def check_leaf_framable(leaf: LeafParams, label: str | None = None) -> None:
+    """:func:`check_framable` on a coarse grid of ``leaf`` placed by its transform, naming the leaf
+    (``label``, default its name) and the field (``transform``, or ``shape`` when the leaf-space
+    geometry itself is not finite)."""
+    what = f"leaf {label or leaf.name or '(unnamed)'}"
+    uv = grid_uv(5, 9).astype(np.float64)
+    local = evaluate(leaf, uv[:, 0], uv[:, 1])
+    if not np.isfinite(local).all():
+        raise ParamError("shape", f"{what}: its surface is not finite; it cannot be drawn")
+    m = leaf.transform.matrix()
+    with np.errstate(over="ignore", invalid="ignore"):
+        world = local @ m[:3, :3].T + m[:3, 3]
+    check_framable(world, what, "transform")
 
 
 def _top(lo: NDArray[np.float64], hi: NDArray[np.float64], w: int, h: int) -> Camera:

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from leafview.atomic import atomic_output
+from leafview.core.limits import MAX_NAME_CHARS, MAX_PLANTS
 from leafview.core.schema import DIALECT, compact_leaf_schema, compact_schema, doc_line, leaf_schema
 from leafview.resources import asset_dir
 from leafview.scene import spec as S
@@ -63,14 +64,15 @@ def scene_schema() -> dict[str, Any]:
         "layout": {"enum": list(S.LAYOUTS), "default": spec_fields["layout"].default},
         "leaves": {"type": "integer", "minimum": 1, "maximum": S.MAX_LEAVES, "default": spec_fields["leaves"].default},
         "seed": {"type": "integer", "minimum": 0, "maximum": 2**63 - 1, "default": spec_fields["seed"].default},
-        "plants": {"type": "integer", "minimum": 0, "maximum": 1_000_000, "default": spec_fields["plants"].default,
-                   "description": "0: chosen from the leaf count"},
+        "plants": {"type": "integer", "minimum": 0, "maximum": MAX_PLANTS, "default": spec_fields["plants"].default,
+                   "description": "0: chosen from the leaf count (leaves and plants together must also fit "
+                                  "in half of the machine's memory)"},
         "variation": {"type": "number", "minimum": 0, "maximum": 0.5, "default": spec_fields["variation"].default,
                       "description": "± fraction of each Ω component per leaf"},
         "colour_variation": {"type": "number", "minimum": 0, "maximum": 0.5,
                              "default": spec_fields["colour_variation"].default},
         "stems": {"type": "boolean", "default": spec_fields["stems"].default},
-        "name": {"type": "string"},
+        "name": {"type": "string", "maxLength": MAX_NAME_CHARS, "pattern": "^[^\\u0000-\\u001f\\u007f-\\u009f]*$"},
     }
     species = {
         "type": "object",
@@ -79,7 +81,8 @@ def scene_schema() -> dict[str, Any]:
                        "description": "relative frequency per plant"},
             "leaf": {"anyOf": [{"$ref": "#/$defs/compactLeaf"}, {"$ref": "#/$defs/fullLeaf"}]},
             "preset": {"type": "string", "minLength": 1,
-                       "description": "a built-in preset name or a path relative to the scene file"},
+                       "description": "a built-in preset name or a path relative to the scene file, inside "
+                                      "its folder (absolute paths and '..' need --allow-outside-presets)"},
         },
         "oneOf": [{"required": ["leaf"]}, {"required": ["preset"]}],
         "additionalProperties": False,

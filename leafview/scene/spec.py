@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -33,20 +34,28 @@ import numpy as np
 import tomli_w
 from numpy.typing import NDArray
 
-from leafview.atomic import atomic_output
+from leafview.atomic import write_text
 from leafview.core.compact import compact_dict, parse_compact
-from leafview.core.io import read_document
+from leafview.core.io import load_params, read_document
+from leafview.core.limits import (
+    MAX_LEAVES,
+    MAX_PLANTS,
+    check_count,
+    check_memory,
+    check_name,
+    scene_bytes,
+)
 from leafview.core.params import Bending, LeafParams, ParamError, Shape, Transform, Vec3, parse_params
 from leafview.deform.beam import bend_profile
 from leafview.deform.surface import evaluate, grid_uv, partials
-from leafview.resources import resolve_preset
-from leafview.scene.plants import Placement, PlantSpec, scatter
+from leafview.resources import builtin_presets
+from leafview.scene.plants import LEAVES_PER_PLANT, Placement, PlantSpec, scatter
 
 __all__ = ["SceneSpec", "Scene", "build_scene", "load_scene", "save_scene", "scene_from_leaves", "LAYOUTS", "VARIED",
            "MAX_LEAVES", "vary_shape", "evaluate_leaf", "bend_deviation"]
 
 LAYOUTS = ("plant", "field", "hedge")
-MAX_LEAVES = 10_000_000           # refused above this (the host arrays alone would pass 10 GB)
+# MAX_LEAVES and MAX_PLANTS: leafview.core.limits (with the memory check of SceneSpec)
 SCENE_SCHEMA = 1
 
 # Ω components that vary per leaf (column order of Scene.factors)
@@ -88,9 +97,15 @@ class SceneSpec:
         object.__setattr__(self, "weights", tuple(float(w) for w in weights))
         if self.layout not in LAYOUTS:
             raise ParamError("scene.layout", f"unknown layout {self.layout!r} (use {', '.join(LAYOUTS)})")
-        _check_int("scene.leaves", self.leaves, 1, MAX_LEAVES)
-        _check_int("scene.seed", self.seed, 0, 2**63 - 1)
-        _check_int("scene.plants", self.plants, 0, 1_000_000)
+        check_count("scene.leaves", self.leaves, 1, MAX_LEAVES)
+        check_count("scene.seed", self.seed, 0, 2**63 - 1)
+        check_count("scene.plants", self.plants, 0, MAX_PLANTS)
+        check_name(self.name, "scene.name")
+        plants = self.plants or (1 if self.layout == "plant" else max(1, round(self.leaves / LEAVES_PER_PLANT)))
+        stem_plants = plants if self.stems else 0
+        check_memory("scene.plants" if scene_bytes(0, stem_plants) > scene_bytes(self.leaves, 0) else "scene.leaves",
+                     scene_bytes(self.leaves, stem_plants),
+                     f"{self.leaves:,} leaves on {plants:,} plants")
         for key, hi in (("variation", 0.5), ("colour_variation", 0.5)):
             value = getattr(self, key)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0.0 <= value <= hi:
@@ -135,10 +150,13 @@ class SceneSpec:
         return out
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], *, base: Path | None = None) -> SceneSpec:
+    def from_dict(cls, data: Mapping[str, Any], *, base: Path | None = None,
+                  allow_outside: bool = False) -> SceneSpec:
         """Validate a scene document. A species is ``{leaf = {...}}`` (inline parameters, full or
-        compact: :mod:`leafview.core.compact`) or
-        ``{preset = "name or path"}`` (resolved against ``base``, the file's folder)."""
+        compact: :mod:`leafview.core.compact`) or ``{preset = "name or path"}``: a built-in name,
+        or a path resolved against ``base`` (the file's folder; the working directory when None)
+        that must stay inside it (no absolute path, no ``..``, no link out of it) unless
+        ``allow_outside``."""
         if not isinstance(data, Mapping):
             raise ParamError("", "expected a table at the top level")
         unknown = set(data) - {"schema", "scene", "species", "plant"}
@@ -167,7 +185,7 @@ class SceneSpec:
             if ("leaf" in item) == ("preset" in item):
                 raise ParamError(where, "give exactly one of 'leaf' (a parameter table) or 'preset'")
             if "preset" in item:
-                species.append(_load_preset(item["preset"], base, where))
+                species.append(_load_preset(item["preset"], base, where, allow_outside))
             else:
                 species.append(_species_leaf(item["leaf"], f"{where}.leaf"))
             weight = item.get("weight", 1.0)
@@ -186,7 +204,7 @@ class SceneSpec:
                    variation=scene.get("variation", defaults["variation"].default),
                    colour_variation=scene.get("colour_variation", defaults["colour_variation"].default),
                    stems=scene.get("stems", defaults["stems"].default),
-                   plant=dict(plant), name=str(scene.get("name", "")))
+                   plant=dict(plant), name=check_name(scene.get("name", ""), "scene.name"))
 
 
 def _species_leaf(table: Any, where: str) -> LeafParams:
@@ -203,34 +221,63 @@ def _species_leaf(table: Any, where: str) -> LeafParams:
         raise ParamError(f"{where}.{exc.path}".rstrip("."), exc.message) from None
 
 
-def _check_int(path: str, value: Any, lo: int, hi: int) -> None:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ParamError(path, f"must be a whole number, got {value!r}")
-    if not lo <= value <= hi:
-        raise ParamError(path, f"must be in {lo}..{hi:,}, got {value:,}")
-
-
-def _load_preset(spec: Any, base: Path | None, where: str) -> LeafParams:
-
+def _load_preset(spec: Any, base: Path | None, where: str, allow_outside: bool = False) -> LeafParams:
+    """A species preset: a built-in name, or a file inside ``base`` (see :meth:`SceneSpec.from_dict`).
+    A file that fails to load is named with the reason, never with its content (it may be any
+    file on the machine)."""
     if not isinstance(spec, str) or not spec:
         raise ParamError(f"{where}.preset", "must be a preset name or a path")
-    path = Path(spec)
-    if base is not None and not path.is_absolute() and (base / path).exists():
-        path = base / path
+    check_name(spec, f"{where}.preset")
+    builtin = builtin_presets()
+    if spec in builtin:
+        path = builtin[spec]
     else:
-        path = resolve_preset(spec)
-    if not path.exists():
-        raise ParamError(f"{where}.preset", f"no such preset file or built-in name: {spec!r}")
-    return LeafParams.load(path)
+        folder = (base if base is not None else Path.cwd()).resolve()
+        given = Path(spec)
+        outside = given.is_absolute() or ".." in given.parts
+        path = (folder / given).resolve() if not given.is_absolute() else given.resolve()
+        if not outside and not path.is_relative_to(folder):
+            outside = True          # a link that leads out of the folder
+        if outside and not allow_outside:
+            raise ParamError(f"{where}.preset", f"{spec!r} leaves the scene file's folder (an absolute path, "
+                                                "'..' or a link out of it); use a path inside it, a built-in "
+                                                "name, or --allow-outside-presets")
+        if not path.exists():
+            raise ParamError(f"{where}.preset", f"no such preset file or built-in name: {spec!r}")
+    try:
+        return load_params(path)
+    except ParamError as exc:
+        raise ParamError(f"{where}.preset", f"{spec!r} is not a usable leaf preset: {_reason(exc)}") from None
 
 
-def load_scene(path: str | os.PathLike[str]) -> SceneSpec:
-    """Read a scene file (``.toml`` or ``.json``); errors name the file and field or line."""
+_FIELD_PATH = re.compile(r"^(schema|name|shape|jitter|material|transform|ripple|bending|omega|half|leafview|leaves)"
+                         r"(\.[a-z_0-9]+)?(\[\d+\])*$")
+
+
+def _reason(exc: ParamError) -> str:
+    """Why a preset failed, without its content: the kind of problem, the line of a syntax error
+    and the field path when it is one of the known fields."""
+    src = exc.source or ""
+    m = re.search(r":(\d+):\d+$", src)
+    msg = exc.message
+    if "syntax error" in msg:
+        return f"a syntax error at line {m.group(1)}" if m else "a syntax error"
+    if not exc.path:     # the reader refused the file itself (size, type, encoding, nesting)
+        return msg.split(":")[0] if msg.startswith("not UTF-8") else msg
+    if msg.startswith("unknown key"):
+        return "it is not a leaf parameter file (unknown keys)"
+    field = exc.path.split(" ")[0]
+    return f"an invalid value at {field}" if _FIELD_PATH.match(field) else "an invalid value"
+
+
+def load_scene(path: str | os.PathLike[str], *, allow_outside_presets: bool = False) -> SceneSpec:
+    """Read a scene file (``.toml`` or ``.json``); errors name the file and field or line. Species
+    presets given as paths must lie in the file's folder unless ``allow_outside_presets``."""
 
     p = Path(path)
     data = read_document(p)
     try:
-        return SceneSpec.from_dict(data, base=p.parent)
+        return SceneSpec.from_dict(data, base=p.parent, allow_outside=allow_outside_presets)
     except ParamError as exc:
         raise exc.with_source(str(p)) from None
 
@@ -244,8 +291,7 @@ def save_scene(spec: SceneSpec, path: str | os.PathLike[str]) -> None:
         raise ParamError("", f"unknown scene format {p.suffix!r} (use .toml or .json)", str(p))
     data = spec.to_dict()
     text = tomli_w.dumps(data) if p.suffix.lower() == ".toml" else json.dumps(data, indent=2) + "\n"
-    with atomic_output(p) as tmp:
-        tmp.write_text(text, encoding="utf-8")
+    write_text(p, text)   # checked target, atomic rename, every byte on the disk
 
 
 # -- the expanded scene ----------------------------------------------------------------------
