@@ -17,6 +17,18 @@ __all__ = ["LeafviewError", "ParamError", "UsageError", "ExportError", "NonFinit
            "GpuLimitError", "GLUnavailable", "GLContextLost", "ShaderError", "ImageWriteError"]
 
 
+MAX_MESSAGE_CHARS = 300   # an error repeats at most this much of what it was given
+MAX_PATH_CHARS = 200
+
+
+def shorten(text: str, limit: int) -> str:
+    """``text`` cut to ``limit`` characters with the length of the rest, so that an error about a
+    huge value or key stays one readable line (and never copies the value whole)."""
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}… ({len(text) - limit:,} more characters)"
+
+
 class LeafviewError(Exception):
     """The base of every error leafview raises on purpose."""
 
@@ -26,9 +38,10 @@ class ParamError(LeafviewError, ValueError):
     ``source`` the file (and ``line:col`` for syntax errors) when known."""
 
     def __init__(self, path: str, message: str, source: str | None = None) -> None:
-        self.path = path
-        self.message = message
+        self.path = shorten(path, MAX_PATH_CHARS)
+        self.message = shorten(message, MAX_MESSAGE_CHARS)
         self.source = source
+        path, message = self.path, self.message
         where = f"{source}: " if source else ""
         what = f"{path}: " if path else ""
         super().__init__(f"{where}{what}{message}")

@@ -51,9 +51,12 @@ def test_tool_layers_follow_the_layers_contract() -> None:
     config = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
     contracts = config["tool"]["importlinter"]["contracts"]
     layers = next(c["layers"] for c in contracts if c.get("type") == "layers")
-    *packages, base = layers
+    # the base modules close the list: one layer or a few (errors under atomic, which raises them)
+    split = next(i for i in range(len(layers)) if all(
+        m.strip() in tool.BASE_MODULES for layer in layers[i:] for m in layer.split("|")))
+    packages, base = layers[:split], layers[split:]
     assert [name for name, _ in tool.LAYERS] == packages
-    assert sorted(m.strip() for m in base.split("|")) == sorted(tool.BASE_MODULES)
+    assert sorted(m.strip() for layer in base for m in layer.split("|")) == sorted(tool.BASE_MODULES)
 
 
 def test_png_is_at_most_1200_px_wide() -> None:

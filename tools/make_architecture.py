@@ -61,20 +61,22 @@ LAYERS: list[tuple[str, str]] = [
     ("leafview.botany", "landmarks, catalogue, Ω fits, lobes, morph"),
     ("leafview.deform", "fBm, cantilever beam, the whole surface (numpy)"),
     ("leafview.core", "LeafParams, Bézier maths, blade, files (numpy)"),
+    ("leafview.inputs", "the one reader of input files: type, size, nesting"),
 ]
 BASE_MODULES = ("leafview.errors", "leafview.atomic", "leafview.resources", "leafview._version")
 API_MODULES = ("leafview", "leafview.landmarks", "leafview.shapes", "leafview.beam")
 ORDER = [API] + [name for name, _ in LAYERS] + [BASE]
 ROLES = dict(LAYERS) | {API: "for users, not a layer: nothing inside imports it",
-                        BASE: "independent of each other; import nothing of leafview"}
+                        BASE: "atomic imports errors; nothing else of leafview"}
 TITLES = {API: "public API (leafview)", BASE: "errors | atomic | resources | _version"}
-LEFT_TARGETS = ("leafview.core", BASE)         # arcs into these run on the left, all others on the right
+LEFT_TARGETS = ("leafview.core", "leafview.inputs", BASE)        # arcs into these run on the left, all others on the right
 
 # one colour per importing layer, so that an arc and its count can be told from their neighbours
 COLOURS = {
     API: "#6a3d9a", "leafview.cli": "#1f78b4", "leafview.bench": "#b15928", "leafview.app": "#e31a1c",
     "leafview.export": "#e08000", "leafview.gpu": "#2d8f2d", "leafview.scene": "#8c6d1f",
-    "leafview.botany": "#138a6a", "leafview.deform": "#6a5acd", "leafview.core": "#c2185b", BASE: "#666666",
+    "leafview.botany": "#138a6a", "leafview.deform": "#6a5acd", "leafview.core": "#c2185b",
+    "leafview.inputs": "#00838f", BASE: "#666666",
 }
 
 # geometry, in inches

@@ -134,7 +134,9 @@ def _run_parametric(args: argparse.Namespace, paths: list[Path], kind: str, star
         what = leaves[0].name if len(leaves) == 1 else f"{len(leaves)} leaves"
     if kind == ".leaf.json":
         if len(leaves) != 1:
-            raise UsageError(f"{len(leaves)} leaves do not fit one .leaf.json: use -o NAME.leaves.json")
+            source = ", ".join(str(p) for p in paths[:3]) + (", ..." if len(paths) > 3 else "")
+            raise UsageError(f"{out}: {len(leaves)} leaves (from {source}) do not fit one .leaf.json: "
+                             "use -o NAME.leaves.json")
         save_params(leaves[0], out, digits=args.digits)
     else:
         save_leaves(leaves, out, digits=args.digits)

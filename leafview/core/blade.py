@@ -35,7 +35,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.bezier import bernstein, derivative_points
+from leafview.core.limits import MAX_GRID
 from leafview.core.params import Jitter, LeafParams
+from leafview.errors import ParamError
 
 __all__ = [
     "JITTER_TABLE_SIZE",
@@ -257,6 +259,8 @@ def grid_uv(nu: int, nv: int) -> NDArray[np.float32]:
     ``v = linspace(0, 1, nv)``. An odd ``nu`` puts a column on the midrib."""
     if nu < 2 or nv < 2:
         raise ValueError(f"grid needs at least 2×2 samples, got {nu}×{nv}")
+    if nu > MAX_GRID or nv > MAX_GRID:   # before allocating: 10⁶ × 10⁶ would ask for terabytes
+        raise ParamError("grid", f"at most {MAX_GRID}×{MAX_GRID} samples, got {nu}×{nv}")
     u = np.linspace(-1.0, 1.0, nu)
     v = np.linspace(0.0, 1.0, nv)
     uu, vv = np.meshgrid(u, v)

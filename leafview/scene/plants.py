@@ -75,11 +75,11 @@ def _num(name: str, value: Any, lo: float | None = None, hi: float | None = None
     path = f"{prefix}{name}"
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ParamError(path, f"must be a number, got {value!r}")
-    if integer and float(value) != int(value):
+    if not math.isfinite(float(value)):
+        raise ParamError(path, f"must be finite, got {value!r}")
+    if integer and float(value) != math.floor(float(value)):
         raise ParamError(path, f"must be an integer, got {value!r}")
     v = int(value) if integer else float(value)
-    if not math.isfinite(v):
-        raise ParamError(path, f"must be finite, got {value!r}")
     if lo is not None and (v <= lo if open_lo else v < lo):
         raise ParamError(path, f"must be {'>' if open_lo else '≥'} {lo:g}, got {v:g}")
     if hi is not None and v > hi:

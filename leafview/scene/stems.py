@@ -431,7 +431,11 @@ def auto_twigs(spec: PlantArchitecture, leaves_per_plant: float) -> int:
     per_twig = (1.0 - S0_TWIG) * spec.twig_length * 0.7 * lb.sum()
     spacing = spec.internode * spec.leaf_size * (1.0 - 0.5 * spec.size_falloff)
     need = leaves_per_plant / spec.per_node * spacing
-    return int(np.clip(math.ceil((need - branch_zone) / per_twig), 0, MAX_TWIGS))
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        twigs = (need - branch_zone) / per_twig if per_twig > 0 else math.inf
+    if not math.isfinite(twigs):   # vanishing twig or branch lengths: as many twigs as allowed
+        return MAX_TWIGS if twigs > 0 else 0
+    return int(np.clip(math.ceil(twigs), 0, MAX_TWIGS))
 
 
 @dataclass
