@@ -1,7 +1,7 @@
 """The documented long run of the fuzz harness: the parse-level properties of tests/fuzz under the
 ``long`` Hypothesis profile, in rounds, until a number of examples (default 10⁶) or a deadline.
 
-Each round runs ``pytest tests/fuzz/test_parse.py`` with ``LEAFVIEW_FUZZ_PROFILE=long`` (random
+Each round runs ``pytest tests/fuzz/test_fuzz_parse.py`` with ``LEAFVIEW_FUZZ_PROFILE=long`` (random
 seeds, the long budgets scaled by ``--scale``) in ``--jobs`` processes, each on its share of the
 properties, and adds up the examples they report (``LEAFVIEW_FUZZ_STATS``). A property that fails
 stops at its first failure in that round (Hypothesis reports the shrunk example) and runs again,
@@ -56,7 +56,7 @@ def _round(jobs: int, scale: float, folder: Path, index: int) -> tuple[Counter[s
         stats = folder / f"round{index}-{i}.json"
         env = {**os.environ, "LEAFVIEW_FUZZ_PROFILE": "long", "LEAFVIEW_FUZZ_LONG_SCALE": str(scale),
                "LEAFVIEW_FUZZ_STATS": str(stats)}
-        cmd = [sys.executable, "-m", "pytest", "tests/fuzz/test_parse.py", "-q", "-p", "no:cacheprovider",
+        cmd = [sys.executable, "-m", "pytest", "tests/fuzz/test_fuzz_parse.py", "-q", "-p", "no:cacheprovider",
                "--no-header", "-W", "ignore::RuntimeWarning", "-k", " or ".join(share)]
         out = open(folder / f"round{index}-{i}.log", "w", encoding="utf-8")   # closed after the wait below
         procs.append((subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=out, stderr=subprocess.STDOUT), stats, out))

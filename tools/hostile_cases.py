@@ -20,7 +20,7 @@ It prints a table of counts by class (and by category), every case that is not c
     python tools/hostile_cases.py --only fifo --jobs 1              # the cases whose name has "fifo"
     python tools/hostile_cases.py --list                            # names and commands only
 
-``tests/fuzz/test_hostile.py`` (slow) runs it and asserts 0 tracebacks, 0 hangs, 0 wrong outcomes.
+``tests/fuzz/test_fuzz_hostile.py`` (slow) runs it and asserts 0 tracebacks, 0 hangs, 0 wrong outcomes.
 """
 
 from __future__ import annotations
