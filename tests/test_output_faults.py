@@ -368,7 +368,7 @@ def test_sigterm_mid_export_removes_the_temp_file(tmp_path, big_scene, sig):
     out = tmp_path / "big.glb"
     out.write_bytes(b"old")
     proc = cli(["export", str(big_scene), "-o", str(out), "--backend", "numpy", "--resolution", "9x17", "-q"],
-               tmp_path, delay=0.3)
+               tmp_path, delay=1.0)
     wait_for_temp(tmp_path, proc)
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
@@ -380,7 +380,7 @@ def test_sigterm_mid_export_removes_the_temp_file(tmp_path, big_scene, sig):
 def test_sigint_mid_export_removes_the_temp_file(tmp_path, big_scene):
     out = tmp_path / "big.glb"
     proc = cli(["export", str(big_scene), "-o", str(out), "--backend", "numpy", "--resolution", "9x17", "-q"],
-               tmp_path, delay=0.3)
+               tmp_path, delay=1.0)
     wait_for_temp(tmp_path, proc)
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=60)

@@ -187,7 +187,8 @@ def _bend_profile_cached(shape: Shape, bending: Bending, rotation_deg: Vec3, sca
     for i in range(len(ds)):                           # sequential: θ⁰ after earlier rotations
         d = rotation(axis, total) @ dirs[i]
         theta = np.arctan2(np.dot(axis, np.cross(d, g)), np.dot(d, g))
-        phi = solve_bending(ds[i], abs(theta), carried[i], ei[i])
+        # a segment too short to have a length in float64 (a petiole of 1e-300 split in 8) cannot bend
+        phi = solve_bending(ds[i], abs(theta), carried[i], ei[i]) if ds[i] > 0.0 else 0.0
         total += np.sign(theta) * float(phi)
         angles[i] = total
     bent_dirs = np.einsum("nij,nj->ni", rotation(axis, angles), dirs)
