@@ -56,7 +56,10 @@ from leafview.scene.spec import SceneSpec, save_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 DRIVER = r"""
-import os, sys, time
+import os, signal, sys, time
+# a parent started with nohup passes SIGHUP on as ignored, and leafview leaves a disposition it
+# did not set alone: start from the default, as a command typed in a terminal does
+signal.signal(signal.SIGHUP, signal.SIG_DFL)
 delay = float(os.environ.get("LV_SLOW_WRITE", "0"))
 if delay:
     real = os.write
