@@ -29,6 +29,7 @@ from support import validate
 from support.validate import ValidatorMissing, ensure_gltf_validator
 
 from leafview.export.images import read_image
+from tests.conftest import require_or_skip
 
 ROOT = Path(__file__).resolve().parent.parent
 APT = re.compile(r"^\s*(sudo\s+)?apt-get\s")
@@ -207,7 +208,7 @@ def test_validator_setup_names_what_is_missing(tmp_path, monkeypatch, tool):
 
 def test_validator_setup_offline_says_the_registry_is_unreachable(tmp_path, monkeypatch):
     if shutil.which("node") is None or shutil.which("npm") is None:
-        pytest.skip("needs node and npm")
+        require_or_skip("needs node and npm (apt-get install nodejs npm)")
     folder = _validator_copy(tmp_path / "gltf_validator")
     monkeypatch.setenv("npm_config_registry", "http://127.0.0.1:9/")     # nothing listens on port 9
     monkeypatch.setenv("npm_config_cache", str(tmp_path / "empty_npm_cache"))

@@ -53,6 +53,7 @@ from leafview.export import images as images_mod
 from leafview.export.images import write_image
 from leafview.resources import builtin_presets
 from leafview.scene.spec import SceneSpec, save_scene
+from tests.conftest import require_or_skip
 
 ROOT = Path(__file__).resolve().parent.parent
 DRIVER = r"""
@@ -112,12 +113,12 @@ def enospc_after(monkeypatch: pytest.MonkeyPatch, limit: int) -> None:
 
 def mount_tmpfs(where: Path, options: str) -> None:
     if os.geteuid() != 0:
-        pytest.skip("a real tmpfs needs root to mount; the patched-write tests cover the same fault")
+        require_or_skip("a real tmpfs needs root to mount; the patched-write tests cover the same fault")
     where.mkdir(exist_ok=True)
     result = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(where)],
                             capture_output=True, text=True)
     if result.returncode:
-        pytest.skip(f"mount -t tmpfs is not permitted here ({result.stderr.strip()}); "
+        require_or_skip(f"mount -t tmpfs is not permitted here ({result.stderr.strip()}); "
                     "the patched-write tests cover the same fault")
 
 
@@ -138,7 +139,7 @@ def ro_fs(tmp_path):
     result = subprocess.run(["mount", "-o", "remount,ro", str(mnt)], capture_output=True, text=True)
     if result.returncode:
         subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
-        pytest.skip(f"remounting read-only is not permitted here: {result.stderr.strip()}")
+        require_or_skip(f"remounting read-only is not permitted here: {result.stderr.strip()}")
     yield mnt
     subprocess.run(["umount", "-l", str(mnt)], capture_output=True)
 
