@@ -51,7 +51,7 @@ from leafview.errors import LeafviewError, OutputError, OutputPathError
 
 __all__ = ["atomic_output", "write_bytes", "write_text", "outputs", "Outputs", "check_target", "check_folder",
            "output_error", "diagnose", "sweep_stale", "is_temp_name", "safe_component", "UniqueNames",
-           "Terminated", "signal_guard", "failed_write", "brief", "NAME_MAX"]
+           "Terminated", "signal_guard", "uninterruptible", "failed_write", "brief", "NAME_MAX"]
 
 NAME_MAX = 255                    # bytes in one file name (Linux, macOS, Windows in UTF-16 units)
 SAFE_NAME_BYTES = 200             # a name made from input: room for "-N", the suffix and a temp name
@@ -479,6 +479,14 @@ def _critical() -> Iterator[None]:
             if _pending == signal.SIGINT:
                 raise KeyboardInterrupt
             raise Terminated(_pending)
+
+
+def uninterruptible() -> contextlib.AbstractContextManager[None]:
+    """A step a signal must not cut in half, for writers that call into C libraries: SIGINT,
+    SIGTERM or SIGHUP arriving inside it is raised when it ends (the temporary file is then removed
+    as usual). ``write_image`` encodes each image inside one, so libpng never finishes a PNG
+    it was interrupted in (and never prints its own "No IDATs written")."""
+    return _critical()
 
 
 # -- transactions -------------------------------------------------------------------------------

@@ -137,6 +137,26 @@ def test_argparse_errors_exit_2(tmp_path, monkeypatch, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("args", [
+    ["render", "ovate", "-o", ""],
+    ["export", "ovate", "-o", ""],
+    ["shapes", "cordate", "-o", ""],
+    ["morph", "ovate", "lanceolate", "-o", ""],
+    ["scene", "--leaves", "3", "-o", ""],
+    ["scene", "--leaves", "3", "--save", ""],
+    ["scene", "--leaves", "3", "--export", ""],
+    ["scene", "--leaves", "3", "--view", "--screenshot", ""],
+    ["view", "ovate", "--screenshot", ""],
+])
+def test_an_empty_output_path_is_refused_not_read_as_the_current_folder(tmp_path, monkeypatch, capsys, args):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as info:
+        main(args)
+    assert info.value.code == 2
+    assert "an empty path" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_presets_command_lists_builtins(capsys):
     assert main(["presets"]) == 0
     out = capsys.readouterr().out

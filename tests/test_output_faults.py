@@ -381,6 +381,27 @@ def test_sigterm_mid_export_removes_the_temp_file(tmp_path, big_scene, sig):
     assert out.read_bytes() == b"old" and temps(tmp_path) == []
 
 
+@pytest.mark.parametrize("after", [0.0, 0.05, 0.3])
+def test_sigterm_mid_png_is_one_line_and_leaves_nothing(gl, tmp_path, after):
+    """The PNG encoder (libpng under OpenImageIO) runs as one uninterruptible step: a SIGTERM that
+    lands while it has the file open waits for the close, so libpng never finishes a half-written
+    PNG and prints nothing of its own; the temporary file is removed and the old target kept."""
+    out = tmp_path / "big.png"
+    out.write_bytes(b"old")
+    proc = cli(["render", "ovate", "-o", str(out), "--size", "3000", "-q"], tmp_path)
+    wait_for_temp(tmp_path, proc)
+    time.sleep(after)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    if proc.returncode == 0:      # the render finished before the signal: a complete new file
+        assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and temps(tmp_path) == []
+        return
+    assert proc.returncode == 128 + signal.SIGTERM, err
+    assert "terminated by SIGTERM" in one_line(err)
+    assert "IDAT" not in err and "libpng" not in err
+    assert out.read_bytes() == b"old" and temps(tmp_path) == []
+
+
 def test_sigint_mid_export_removes_the_temp_file(tmp_path, big_scene):
     out = tmp_path / "big.glb"
     proc = cli(["export", str(big_scene), "-o", str(out), "--backend", "numpy", "--resolution", "9x17", "-q"],

@@ -25,14 +25,22 @@ from leafview.resources import builtin_presets, resolve_preset
 from leafview.scene.camera import VIEWS
 
 __all__ = ["EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_INTERRUPTED", "VIEWS", "count", "int_in_range", "int_pair",
-           "pixels", "image_size", "window_size", "grid", "builtin_names", "expand_presets", "preset_file",
-           "load_leaf_files", "refuse_directory", "output_directory", "output_names", "report", "progress_bar"]
+           "pixels", "image_size", "output_path", "window_size", "grid", "builtin_names", "expand_presets",
+           "preset_file", "load_leaf_files", "refuse_directory", "output_directory", "output_names", "report", "progress_bar"]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 EXIT_INTERRUPTED = 130   # Ctrl-C, as a shell reports SIGINT
 
 
 # -- argument types -----------------------------------------------------------------------------
+def output_path(text: str) -> str:
+    """An output path for argparse (``-o``, ``--save``, ``--export``): refuses the empty string,
+    which would otherwise name the current folder and write there."""
+    if not text:
+        raise argparse.ArgumentTypeError("an empty path; give a file or folder name")
+    return text
+
+
 def count(text: str, *, lo: int, hi: int, what: str, name: str | None = None) -> int:
     """A count for argparse (``10_000``, ``1e6``), in lo..hi (:mod:`leafview.core.limits`); never an
     OverflowError (``1e400``) or a 5,000-digit conversion."""

@@ -29,6 +29,7 @@ from leafview.cli.args import (
     load_leaf_files,
     output_directory,
     output_names,
+    output_path,
     progress_bar,
     refuse_directory,
 )
@@ -80,7 +81,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                           "Formats: .glb/.gltf (glTF 2.0), .obj, .ply, .usda/.usdc. See docs/export.md.")
     parser.add_argument("inputs", nargs="+", metavar="PRESET|SCENE",
                         help="preset files, directories of presets, built-in names, or one scene file")
-    parser.add_argument("-o", "--output", required=True, metavar="FILE|DIR")
+    parser.add_argument("-o", "--output", required=True, type=output_path, metavar="FILE|DIR")
     parser.add_argument("--format", choices=_FORMAT_NAMES, default=None,
                         help="file type for -o DIR (default glb), or to check -o FILE's suffix")
     parser.add_argument("--resolution", type=_resolution, default=DEFAULT_RESOLUTION, metavar="NUxNV",

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from leafview.atomic import outputs, write_text
 from leafview.botany.shapes import INSTANCE_TARGET
-from leafview.cli.args import EXIT_OK, VIEWS, output_directory, pixels, progress_bar
+from leafview.cli.args import EXIT_OK, VIEWS, output_directory, output_path, pixels, progress_bar
 from leafview.core.io import dumps_toml
 from leafview.core.limits import MAX_MORPH_FRAMES
 from leafview.errors import UsageError
@@ -45,7 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--ref", action="append", default=[], metavar="C[:W]",
                    help="reference shape with weight W >= 0 (default 1), in path order; repeatable")
     p.add_argument("--frames", type=int, default=24, help="number of frames, ends included (default 24)")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output directory")
+    p.add_argument("-o", "--output", required=True, type=output_path, metavar="DIR", help="output directory")
     p.add_argument("--size", type=pixels, default=192, help="pixels per frame (default 192)")
     p.add_argument("--view", choices=VIEWS, default="top", help="camera (default top)")
     p.add_argument("--method", choices=("nurbs", "keyframe"), default="nurbs",

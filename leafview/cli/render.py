@@ -22,6 +22,7 @@ from leafview.cli.args import (
     load_leaf_files,
     output_directory,
     output_names,
+    output_path,
     pixels,
     progress_bar,
     refuse_directory,
@@ -43,7 +44,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                           "to images. One preset and -o FILE writes that file; several presets write one "
                           "image each into -o DIR; --sheet writes one labelled contact sheet to -o FILE.")
     parser.add_argument("presets", nargs="+", metavar="PRESET")
-    parser.add_argument("-o", "--output", required=True, metavar="FILE|DIR")
+    parser.add_argument("-o", "--output", required=True, type=output_path, metavar="FILE|DIR")
     parser.add_argument("--size", type=pixels, default=256, help="image width and height in pixels (default 256)")
     parser.add_argument("--view", choices=VIEWS, default="top", help="camera (default top)")
     parser.add_argument("--format", choices=("png", "exr", "tif"), default=None,

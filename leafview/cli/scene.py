@@ -18,7 +18,7 @@ from typing import Any
 
 from leafview.app.scene_view import view_scene
 from leafview.atomic import outputs
-from leafview.cli.args import EXIT_OK, builtin_names, count, image_size, progress_bar, refuse_directory
+from leafview.cli.args import EXIT_OK, builtin_names, count, image_size, output_path, progress_bar, refuse_directory
 from leafview.core.compact import is_compact
 from leafview.core.io import leaves_from_document, read_document, save_leaves
 from leafview.core.limits import MAX_PLANTS, MAX_VIEW_FRAMES
@@ -86,17 +86,20 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "leaf count)")
     p.add_argument("--variation", type=_fraction, help="± fraction each leaf's shape varies (default 0.2)")
     p.add_argument("--no-stems", action="store_true", help="leaves only, no branches")
-    p.add_argument("-o", "--output", metavar="IMAGE", help="render to this image (.png, .tif, .exr)")
+    p.add_argument("-o", "--output", type=output_path, metavar="IMAGE",
+                   help="render to this image (.png, .tif, .exr)")
     p.add_argument("--size", type=image_size, default=(1024, 768), metavar="WxH", help="image size (default 1024x768)")
     p.add_argument("--camera", choices=SCENE_VIEWS, default="three-quarter", help="camera (default three-quarter)")
     p.add_argument("--no-cull", action="store_true", help="draw every leaf (no frustum or size culling)")
     p.add_argument("--no-lod", action="store_true", help="every leaf at the finest grid")
-    p.add_argument("--save", metavar="FILE", help="write the scene file (.toml or .json), or every placed "
-                   "leaf as a leaf set (.leaves.json)")
-    p.add_argument("--export", metavar="FILE", help="bake the scene to a mesh file (.glb, .gltf, .usda, .usdc)")
+    p.add_argument("--save", type=output_path, metavar="FILE",
+                   help="write the scene file (.toml or .json), or every placed leaf as a leaf set (.leaves.json)")
+    p.add_argument("--export", type=output_path, metavar="FILE",
+                   help="bake the scene to a mesh file (.glb, .gltf, .usda, .usdc)")
     p.add_argument("--view", action="store_true", help="open the scene in a window (orbit, culling/LOD panel)")
     p.add_argument("--frames", type=_frames, metavar="N", help="with --view: draw N frames, then close (scripted runs)")
-    p.add_argument("--screenshot", metavar="IMAGE", help="with --view: write the window after the last frame")
+    p.add_argument("--screenshot", type=output_path, metavar="IMAGE",
+                   help="with --view: write the window after the last frame")
     p.add_argument("--allow-outside-presets", action="store_true",
                    help="let the scene file's [[species]] preset paths leave its folder (absolute paths, '..')")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")

@@ -20,7 +20,16 @@ from typing import Any
 from leafview.atomic import outputs
 from leafview.botany.lobes import load_lobed_leaf
 from leafview.botany.shapes import fit_info, shape_names, shapes_params
-from leafview.cli.args import EXIT_OK, VIEWS, output_directory, output_names, pixels, progress_bar, refuse_directory
+from leafview.cli.args import (
+    EXIT_OK,
+    VIEWS,
+    output_directory,
+    output_names,
+    output_path,
+    pixels,
+    progress_bar,
+    refuse_directory,
+)
 from leafview.core.defaults import DETAIL_GRID
 from leafview.core.params import LeafParams
 from leafview.errors import UsageError
@@ -36,7 +45,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = ("The unilobed leaf shapes (Garg & Leow 2011, Table 1, Fig. 5) fitted to the shader "
                      "model, and multilobed leaves (sec. 5). Without -o: list the shapes and their fit "
                      "errors. With -o: render them (all, or --names) through the shader path.")
-    p.add_argument("-o", "--output", metavar="FILE|DIR", help="image file (one shape, or --sheet) or directory")
+    p.add_argument("-o", "--output", type=output_path, metavar="FILE|DIR",
+                   help="image file (one shape, or --sheet) or directory")
     p.add_argument("--names", nargs="+", metavar="NAME", help="catalogue names (default: all); commas work too")
     p.add_argument("--sheet", action="store_true", help="one labelled contact sheet")
     p.add_argument("--size", type=pixels, default=128, help="pixels per image (default 128)")

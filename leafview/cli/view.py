@@ -11,7 +11,7 @@ import argparse
 
 from leafview.app.viewer import open_state
 from leafview.app.window import ViewerWindow
-from leafview.cli.args import int_in_range, preset_file, refuse_directory, window_size
+from leafview.cli.args import int_in_range, output_path, preset_file, refuse_directory, window_size
 from leafview.core.params import LeafParams
 from leafview.errors import UsageError
 from leafview.export.images import format_of
@@ -33,7 +33,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="window size (default 1280x800)")
     parser.add_argument("--frames", type=_frames, default=None, metavar="N",
                         help="run N frames and exit (scripted runs, CI); no unsaved-edit question")
-    parser.add_argument("--screenshot", default=None, metavar="FILE",
+    parser.add_argument("--screenshot", type=output_path, default=None, metavar="FILE",
                         help="after the last frame, write the whole window (scene and panel) as PNG/TIFF")
     parser.add_argument("--dev", action="store_true",
                         help="hot-reload shaders/ when the files change (errors shown, old shaders kept)")

@@ -17,7 +17,7 @@ import OpenImageIO as oiio
 from numpy.typing import NDArray
 
 from leafview._version import __version__
-from leafview.atomic import atomic_output, brief, check_target, failed_write
+from leafview.atomic import atomic_output, brief, check_target, failed_write, uninterruptible
 from leafview.core.params import LeafParams
 from leafview.errors import ImageWriteError
 
@@ -122,11 +122,12 @@ def write_image(path: str | os.PathLike[str], pixels: NDArray[Any], *, params: L
         if out is None:
             raise _oiio_error(f"{target}: cannot create a {fmt} writer")
         failure, detail = "", ""
-        if not out.open(str(tmp), spec):
-            failure, detail = "cannot open for writing", out.geterror()
-        elif not out.write_image(data):
-            failure, detail = "writing pixels failed", out.geterror()
-        closed = out.close()
+        with uninterruptible():   # open, pixels and close as one step: a signal waits for the close
+            if not out.open(str(tmp), spec):
+                failure, detail = "cannot open for writing", out.geterror()
+            elif not out.write_image(data):
+                failure, detail = "writing pixels failed", out.geterror()
+            closed = out.close()
         if not failure and (not closed or _has_error(out)):
             failure, detail = "closing failed", out.geterror()
         if failure:
