@@ -377,8 +377,10 @@ def corpus() -> list[Case]:
                                                          "--size", "16"], out=()))
     add(Case("output-under-proc-export", "file-system faults", ["export", "ovate", "-o", "/proc/leafview-hostile.glb"],
              out=()))
-    add(Case("output-empty-string", "file-system faults", ["render", "ovate", "-o", "", "--size", "16"], expect="any",
-             out=("out", ".")))
+    for name, argv in (("render", ["render", "ovate", "-o", "", "--size", "16"]),
+                       ("export", ["export", "ovate", "-o", ""]),
+                       ("scene-save", ["scene", "--leaves", "5", "--save", ""])):
+        add(Case(f"output-empty-string-{name}", "file-system faults", argv, out=("out", ".")))
     add(Case("output-deep-new-folder", "file-system faults", ["render", "ovate", "-o", "out/a/b/c/x.png", "--size", "16"],
              expect="succeed"))
 
