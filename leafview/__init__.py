@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 
 from leafview._version import __version__
 from leafview.core import FieldSpec, Jitter, LeafParams, Material, ParamError, Shape, Transform, field_specs
+from leafview.core.display import register_png_renderer
 from leafview.deform.fbm import check_signal_args, fbm_signal
 from leafview.deform.surface import Mesh, evaluate, normals, partials, tessellate
 from leafview.errors import LeafviewError
@@ -38,6 +39,18 @@ def __getattr__(name: str) -> Any:
     if name == "render":
         return importlib.import_module("leafview.gpu").render
     raise AttributeError(f"module 'leafview' has no attribute {name!r}")
+
+
+def _thumbnail_png(kind: str, obj: object) -> bytes:
+    """PNG bytes of a leaf or scene thumbnail; the GL code loads on the first thumbnail."""
+    thumbnails = importlib.import_module("leafview.notebook.thumbnails")
+    png: bytes = getattr(thumbnails, f"{kind}_png")(obj)
+    return png
+
+
+# what a notebook cell ending with a leaf or a scene shows (LeafParams/Scene._repr_png_)
+register_png_renderer("leaf", lambda obj: _thumbnail_png("leaf", obj))
+register_png_renderer("scene", lambda obj: _thumbnail_png("scene", obj))
 
 
 def fbm_noise(n: int, beta: float, seed: int, backend: str = "cpu") -> NDArray[Any]:

@@ -33,6 +33,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from leafview.core.display import png_of
 from leafview.core.limits import MAX_SILHOUETTE_ROWS, check_name
 from leafview.errors import ParamError
 
@@ -338,6 +339,11 @@ class LeafParams:
 
     def replace(self, **groups: Any) -> LeafParams:
         return replace(self, **groups)
+
+    def _repr_png_(self) -> bytes | None:
+        """A 256×256 PNG thumbnail for Jupyter (:func:`leafview.core.display.png_of`), or None
+        where no renderer is registered or OpenGL is unavailable (Jupyter shows the text repr)."""
+        return png_of("leaf", self)
 
 
 class FileIO(Protocol):

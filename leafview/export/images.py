@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import os
+import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -21,7 +22,7 @@ from leafview.atomic import atomic_output, brief, check_target, failed_write, un
 from leafview.core.params import LeafParams
 from leafview.errors import ImageWriteError
 
-__all__ = ["FORMATS", "ImageWriteError", "format_of", "write_image", "read_image", "contact_sheet",
+__all__ = ["FORMATS", "ImageWriteError", "format_of", "write_image", "png_bytes", "read_image", "contact_sheet",
            "PARAMS_ATTRIBUTE"]
 
 FORMATS = {"png": ".png", "exr": ".exr", "tif": ".tif"}
@@ -133,6 +134,21 @@ def write_image(path: str | os.PathLike[str], pixels: NDArray[Any], *, params: L
         if failure:
             raise _write_failure(target, failure, detail)
     return target
+
+
+def png_bytes(pixels: NDArray[np.uint8]) -> bytes:
+    """(h, w, c) uint8 sRGB pixels (c = 1, 3 or 4; row 0 at the top) as the bytes of a PNG file, for
+    in-memory uses such as Jupyter's ``_repr_png_``: encoded by :func:`write_image` into a private
+    temporary folder that is removed before returning."""
+    image = np.asarray(pixels)
+    if image.ndim == 2:
+        image = image[:, :, None]
+    if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] not in (1, 3, 4):
+        raise ImageWriteError(f"png_bytes expects (h, w, 1|3|4) uint8 pixels, got {image.dtype} {image.shape}")
+    with tempfile.TemporaryDirectory(prefix="leafview-png-") as folder:
+        path = Path(folder) / "image.png"
+        write_image(path, image)
+        return path.read_bytes()
 
 
 def read_image(path: str | os.PathLike[str]) -> tuple[NDArray[Any], dict[str, Any]]:

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 
 from leafview.atomic import write_text
 from leafview.core.compact import compact_dict, parse_compact
+from leafview.core.display import png_of
 from leafview.core.io import load_params, read_document
 from leafview.core.limits import (
     MAX_LEAVES,
@@ -395,6 +396,11 @@ class Scene:
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         size = float(np.linalg.norm(self.matrices[:, :3, 0], axis=1).max(initial=0.0))
         return lo - size, hi + size
+
+    def _repr_png_(self) -> bytes | None:
+        """A 256×256 PNG of the scene for Jupyter (:func:`leafview.core.display.png_of`), or None
+        where no renderer is registered or OpenGL is unavailable (Jupyter shows the text repr)."""
+        return png_of("scene", self)
 
 
 def _tinted(colour: Vec3, t: float) -> Vec3:
