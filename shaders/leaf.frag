@@ -2,6 +2,11 @@
 // Two-sided leaf shading: front (upper, +z side) and back colours, a key and a fill light,
 // diffuse transmission ("translucency") for light arriving from the other side, a faint
 // specular sheen on the upper side and a lighter midrib.
+//
+// LEAF_AOV: the label pass of leafview/gpu/aov.py instead of a colour: one output per
+// AOV_OUTPUTS entry of leafview/gpu/layout.py (leaf index + 1, view-space depth, world normal of
+// the visible side, (u, v)); LEAF_STEMS marks the stem program (leaf_baked.vert, no leaf index):
+// instance 0 and (u, v) 0, depth and normal written.
 #include "generated/frame_block.glsl"
 #include "color.glsl"
 
@@ -11,7 +16,19 @@ in vec2 v_uv;
 flat in vec4 v_front;
 flat in vec3 v_back;
 
+#ifdef LEAF_AOV
+#ifndef LEAF_STEMS
+flat in uint v_leaf;
+#endif
+#include "generated/aov_outputs.glsl"
+#else
 out vec4 frag_color;
+#endif
+
+// the unit normal of the side the camera sees (front faces show the upper side)
+vec3 visible_normal() {
+    return normalize(v_normal) * (gl_FrontFacing ? 1.0 : -1.0);
+}
 
 vec3 light_term(vec3 n, vec3 view_dir, vec4 light, vec3 albedo, float translucency, float sheen) {
     vec3 l = normalize(light.xyz);
@@ -22,9 +39,22 @@ vec3 light_term(vec3 n, vec3 view_dir, vec4 light, vec3 albedo, float translucen
     return light.w * ((diffuse + through) * albedo + vec3(spec));
 }
 
+#ifdef LEAF_AOV
+void main() {
+#ifdef LEAF_STEMS
+    aov_instance = 0u;
+    aov_uv = vec2(0.0);
+#else
+    aov_instance = v_leaf + 1u;
+    aov_uv = v_uv;
+#endif
+    aov_depth = -(frame.view * vec4(v_world, 1.0)).z;   // along the optical axis, perspective or not
+    aov_normal = vec4(visible_normal(), 0.0);
+}
+#else
 void main() {
     bool front = gl_FrontFacing;
-    vec3 n = normalize(v_normal) * (front ? 1.0 : -1.0);
+    vec3 n = visible_normal();
     vec3 albedo = front ? v_front.rgb : v_back;
     float translucency = v_front.a;
     // midrib: a narrow lighter band along u = 0, fading toward the apex
@@ -42,3 +72,4 @@ void main() {
     }
     frag_color = vec4(frame.flags.x != 0 ? linear_to_srgb(color) : color, 1.0);
 }
+#endif

@@ -32,6 +32,18 @@ out vec3 v_normal;
 out vec2 v_uv;
 flat out vec4 v_front;      // rgb, translucency
 flat out vec3 v_back;
+#ifdef LEAF_AOV
+// label pass (leafview/gpu/aov.py): the scene's index of the leaf, for the instance output
+flat out uint v_leaf;
+#if defined(LEAF_INDIRECT)
+#include "generated/aov_vertex.glsl"
+#define LEAF_INDEX (leaf_offset + in_leaf)   // in_leaf counts within the batch
+#elif defined(LEAF_INSTANCED)
+#define LEAF_INDEX uint(gl_InstanceID)
+#else
+#define LEAF_INDEX 0u
+#endif
+#endif
 
 void main() {
     // one half only (shape.half = ±1, e.g. each side of an asymmetric leaf): the grid's u in
@@ -51,5 +63,8 @@ void main() {
     v_uv = uv;
     v_front = LEAF.front;
     v_back = LEAF.back.rgb;
+#ifdef LEAF_AOV
+    v_leaf = LEAF_INDEX;
+#endif
     gl_Position = frame.proj * frame.view * world;
 }

@@ -40,7 +40,8 @@ __all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "SPECIES_CULL_BLOCK", "DRAW_COM
            "SPECIES_BINDING", "COMMANDS_BINDING", "VISIBLE_BINDING", "FBM_JOBS_BINDING", "READBACK_BINDING",
            "JITTER_UNIT", "ATLAS_UNIT",
            "Slot", "LEAF_SLOTS", "PAIR_MEMBERS", "read_slot", "write_slot", "read_pair", "accessors_glsl",
-           "struct_from_dtype", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources"]
+           "struct_from_dtype", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources",
+           "AovOutput", "AOV_OUTPUTS", "LEAF_OFFSET_UNIFORM", "aov_outputs_glsl"]
 
 _TYPES = {"vec4": ("<f4", (4,)), "ivec4": ("<i4", (4,)), "mat4": ("<f4", (4, 4))}
 
@@ -438,6 +439,54 @@ def pack_leaves(params: Iterable[LeafParams]) -> tuple[NDArray[Any], NDArray[np.
     return recs, table.astype(np.float32)
 
 
+# -- per-pixel label outputs (leafview/gpu/aov.py) ----------------------------------------------
+@dataclass(frozen=True)
+class AovOutput:
+    """One colour attachment of the label pass (``LEAF_AOV``): the AOV ``name``, the GLSL type of
+    the fragment output ``aov_<name>``, the attachment's components and moderngl dtype, and its
+    location (= colour attachment index)."""
+
+    name: str
+    glsl: str
+    components: int
+    dtype: str
+    location: int
+    doc: str = ""
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes a pixel of this attachment takes."""
+        return 4 * self.components
+
+
+AOV_OUTPUTS: tuple[AovOutput, ...] = (
+    AovOutput("instance", "uint", 1, "u4", 0, "R32UI: global leaf index + 1, 0 background and stems"),
+    AovOutput("depth", "float", 1, "f4", 1, "R32F: -z in view space (along the optical axis)"),
+    # RGB32F is not required to be colour-renderable: RGBA32F, w unused (0)
+    AovOutput("normal", "vec4", 4, "f4", 2, "RGBA32F: world-space unit normal of the visible side"),
+    AovOutput("uv", "vec2", 2, "f4", 3, "RG32F: the leaf's (u, v) as leaf.vert gives v_uv"),
+)
+LEAF_OFFSET_UNIFORM = "leaf_offset"
+"""``uint`` uniform of ``leaf.vert`` (``LEAF_AOV`` with ``LEAF_INDIRECT``): the first leaf of the
+batch being drawn, so that ``v_leaf = leaf_offset + in_leaf`` is the scene's leaf index."""
+
+
+def aov_outputs_glsl() -> str:
+    """The fragment outputs of the label pass, one per :data:`AOV_OUTPUTS` entry."""
+    lines = ["// generated from leafview/gpu/layout.py: the label pass's outputs (AOV_OUTPUTS)"]
+    lines += [f"layout(location = {o.location}) out {o.glsl} aov_{o.name};  // {o.doc}" for o in AOV_OUTPUTS]
+    return "\n".join(lines) + "\n"
+
+
+def _check_aov_outputs(outputs: Iterable[AovOutput]) -> None:
+    locations = [o.location for o in outputs]
+    if locations != list(range(len(locations))):
+        raise AssertionError(f"AOV output locations must be 0..n-1 in order, got {locations}")
+
+
+_check_aov_outputs(AOV_OUTPUTS)
+
+
 def _vec(v: Any) -> str:
     return ", ".join(f"{float(x):.1f}" for x in v)
 
@@ -456,4 +505,7 @@ def generated_sources() -> dict[str, str]:
         "generated/scene_blocks.glsl": (SPECIES_CULL_BLOCK.struct_glsl()
                                         + struct_from_dtype("DrawCommand", DRAW_COMMAND_DTYPE)),
         "generated/fbm_job.glsl": struct_from_dtype("FbmJob", FBM_JOB_DTYPE),
+        "generated/aov_outputs.glsl": aov_outputs_glsl(),
+        "generated/aov_vertex.glsl": (f"// generated from leafview/gpu/layout.py: first leaf of the drawn batch\n"
+                                      f"uniform uint {LEAF_OFFSET_UNIFORM};\n"),
     }

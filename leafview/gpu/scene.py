@@ -20,7 +20,7 @@ are split into batches automatically (:func:`plan_batches`).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -39,6 +39,7 @@ from leafview.gpu.layout import (
     COMMANDS_BINDING,
     DRAW_COMMAND_DTYPE,
     LEAF_BLOCK,
+    LEAF_OFFSET_UNIFORM,
     LEAVES_BINDING,
     SPECIES_BINDING,
     SPECIES_CULL_BLOCK,
@@ -62,6 +63,9 @@ LOD_GRIDS: tuple[tuple[int, int], ...] = ((9, 17), (5, 9), (3, 5))  # 256, 64, 1
 STEM_FRONT = (0.30, 0.22, 0.14, 0.0)
 STEM_BACK = (0.30, 0.22, 0.14)
 _LOCAL = 64
+# the stems' vertex record: (attribute, format, the same bytes skipped)
+_STEM_ATTRS = (("in_position", "3f", "12x"), ("in_normal", "3f", "12x"), ("in_uv", "2f", "8x"),
+               ("in_front", "4f1", "4x"), ("in_back", "4f1", "4x"))
 _CULL_CHUNK = 8192     # species records captured at once when measuring culling spheres and LOD errors
 
 
@@ -322,6 +326,10 @@ class SceneRenderer:
         ensure_alive(ctx, "uploading a scene")
         self._objects = GLObjects()
         self.batches: list[_SceneBatch] = []
+        self._stem_buffers: tuple[moderngl.Buffer, moderngl.Buffer] | None = None
+        # program variants (draw(defines=...)): leaf program, one vertex array per batch, stems
+        self._variants: dict[tuple[tuple[str, str], ...], tuple[moderngl.Program, list[moderngl.VertexArray],
+                                                                moderngl.VertexArray | None]] = {}
         try:
             self.resources = resources if resources is not None else self._objects.own(GpuResources(ctx))
             limit = int(ctx.info["GL_MAX_SHADER_STORAGE_BLOCK_SIZE"])
@@ -427,13 +435,44 @@ class SceneRenderer:
         verts["p"], verts["n"], verts["uv"] = pos, nrm, (1.0, 0.5)  # u = 1: no midrib band
         verts["front"] = np.round(np.asarray(STEM_FRONT) * 255)
         verts["back"][:, :3] = np.round(np.asarray(STEM_BACK) * 255)
-        prog = self.resources.baked_program()
         vbo = self._objects.own(self.ctx.buffer(verts.tobytes()))
         ibo = self._objects.own(self.ctx.buffer(np.asarray(tris, np.uint32).tobytes()))
+        self._stem_buffers = (vbo, ibo)
+        return self._stem_vao(self.resources.baked_program())
+
+    def _stem_vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
+        assert self._stem_buffers is not None
+        vbo, ibo = self._stem_buffers
+        # attributes a variant does not read (the label pass: colours, uv) are skipped as padding
+        attrs = [(name, fmt, pad) for name, fmt, pad in _STEM_ATTRS if name in prog]
+        layout = " ".join(fmt if name in prog else pad for name, fmt, pad in _STEM_ATTRS)
         vao: moderngl.VertexArray = self._objects.own(self.ctx.vertex_array(
-            prog, [(vbo, "3f 3f 2f 4f1 4f1", "in_position", "in_normal", "in_uv", "in_front", "in_back")],
-            index_buffer=ibo, index_element_size=4))
+            prog, [(vbo, layout, *(name for name, _, _ in attrs))], index_buffer=ibo, index_element_size=4))
         return vao
+
+    def _variant(self, defines: Mapping[str, object] | None
+                 ) -> tuple[moderngl.Program, list[moderngl.VertexArray], moderngl.VertexArray | None]:
+        """The leaf program, per-batch vertex arrays and stem vertex array that draw with the extra
+        feature ``defines`` (None: the renderer's own). The stems' program is ``leaf_baked.vert``
+        + ``leaf.frag`` with the same defines and ``LEAF_STEMS``. Built on first use, released
+        with the renderer."""
+        if not defines:
+            return self.program, [b.vao for b in self.batches], self.stems
+        key = tuple(sorted((str(k), str(v)) for k, v in defines.items()))
+        found = self._variants.get(key)
+        if found is None:
+            prog = self.resources.leaf_program({"LEAF_INDIRECT": 1, **feature_defines(self.species_records),
+                                                **defines})
+            vaos = [self._objects.own(self.ctx.vertex_array(prog, [(self.uv_vbo, "2f", "in_uv"),
+                                                                   (b.visible, "1u/i", "in_leaf")],
+                                                            index_buffer=self.ibo, index_element_size=4))
+                    for b in self.batches]
+            stems = None
+            if self._stem_buffers is not None:
+                stems = self._stem_vao(self.resources.programs.program(
+                    "leaf_baked.vert", "leaf.frag", defines={**defines, "LEAF_STEMS": 1}))
+            found = self._variants[key] = (prog, vaos, stems)
+        return found
 
     # -- per frame ---------------------------------------------------------------------------
     def set_camera(self, camera: Camera, size: tuple[int, int], *, srgb: bool = True,
@@ -474,20 +513,28 @@ class SceneRenderer:
         self.jitter.use()
         self.ripples.bind()
 
-    def draw(self, settings: CullSettings = CullSettings()) -> None:
+    def draw(self, settings: CullSettings = CullSettings(), *, defines: Mapping[str, object] | None = None) -> None:
         """Cull and draw every batch (and the stems) into the bound framebuffer. A context
-        released or lost before or between batches raises :class:`~leafview.errors.GLContextLost`."""
+        released or lost before or between batches raises :class:`~leafview.errors.GLContextLost`.
+
+        ``defines``: extra feature defines of a program variant to draw with (e.g. ``LEAF_AOV``,
+        the label pass of :mod:`leafview.gpu.aov`); a variant whose vertex shader declares
+        :data:`~leafview.gpu.layout.LEAF_OFFSET_UNIFORM` gets each batch's first leaf there."""
         ensure_alive(self.ctx, "drawing a scene")
+        program, vaos, stems = self._variant(defines)
+        offset = program.get(LEAF_OFFSET_UNIFORM, None)
         self.ctx.enable_only(moderngl.DEPTH_TEST)
         self._bind_tables()
-        if self.stems is not None:
-            self.stems.render(moderngl.TRIANGLES)
+        if stems is not None:
+            stems.render(moderngl.TRIANGLES)
         self._set_cull_uniforms(settings)
-        for i, batch in enumerate(self.batches):
+        for i, (batch, vao) in enumerate(zip(self.batches, vaos)):
             ensure_alive(self.ctx, f"drawing batch {i + 1} of {len(self.batches)}")
             self._cull(batch)
             batch.rows.bind_to_storage_buffer(LEAVES_BINDING)
-            batch.vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=len(self.grids))
+            if isinstance(offset, moderngl.Uniform):
+                offset.value = batch.start
+            vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=len(self.grids))
 
     def level_counts(self) -> NDArray[np.int64]:
         """Leaves drawn at each level in the last :meth:`draw` (reads the commands back)."""
@@ -565,6 +612,7 @@ class SceneRenderer:
 
     def release(self) -> None:
         """Release every GL object (idempotent)."""
+        self._variants.clear()
         while self.batches:
             self.batches.pop().release()
         self._objects.release()

@@ -1,8 +1,10 @@
 """Offscreen render targets: colour + depth, optionally multisampled with a single-sample resolve
 target, and the readback helpers (row 0 at the top, straight alpha).
 
-One class for every framebuffer of the package (thumbnails, atlases, scenes, the viewer's frame,
-benchmarks), created in one place and released in one place.
+:class:`RenderTarget` is the framebuffer of every colour image of the package (thumbnails,
+atlases, scenes, the viewer's frame, benchmarks); :class:`AovTarget` the single-sample,
+multiple-render-target framebuffer of the label pass (:mod:`leafview.gpu.aov`). Each is created in
+one place and released in one place.
 """
 
 from __future__ import annotations
@@ -13,9 +15,10 @@ import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
-from leafview.gpu.limits import ContextLimits, check_image, context_alive
+from leafview.gpu.layout import AOV_OUTPUTS
+from leafview.gpu.limits import ContextLimits, check_image, check_memory, context_alive
 
-__all__ = ["RenderTarget", "OffscreenTarget", "read_rgba", "unpremultiply"]
+__all__ = ["RenderTarget", "OffscreenTarget", "AovTarget", "read_rgba", "unpremultiply"]
 
 
 def read_rgba(fbo: moderngl.Framebuffer) -> NDArray[np.uint8]:
@@ -115,3 +118,68 @@ class RenderTarget:
 
 
 OffscreenTarget = RenderTarget   # the name the benchmarks and tests know
+
+
+class AovTarget:
+    """The label pass's framebuffer: one single-sample colour attachment per
+    :data:`~leafview.gpu.layout.AOV_OUTPUTS` entry (R32UI instance, R32F depth, RGBA32F normal,
+    RG32F uv, at the entry's location) and a depth buffer. No multisampling and no blending, so
+    every pixel holds the values of exactly one fragment (the nearest).
+
+    The sides, the largest attachment and the memory (every attachment, the depth buffer and two
+    host copies of each readback) are checked against the context's limits before any GL object
+    is made. ``release()`` first binds framebuffer 0, as :class:`RenderTarget` does.
+    """
+
+    def __init__(self, ctx: moderngl.Context, size: tuple[int, int]) -> None:
+        self.ctx, self.size = ctx, (int(size[0]), int(size[1]))
+        w, h = self.size
+        # sides and the largest (16-byte RGBA32F) attachment, then the whole target's memory
+        check_image(ContextLimits.of(ctx), self.size, 0, linear=True, copies=0)
+        per_pixel = sum(o.nbytes for o in AOV_OUTPUTS)
+        check_memory(w * h * (3 * per_pixel + 4), "size", f"the {w}×{h} label images (instance, depth, normal, uv)")
+        self._objects: list[Any] = []
+        try:
+            colour = [self._own(ctx.renderbuffer(self.size, o.components, dtype=o.dtype)) for o in AOV_OUTPUTS]
+            depth = self._own(ctx.depth_renderbuffer(self.size))
+            self.fbo: moderngl.Framebuffer = self._own(ctx.framebuffer(colour, depth))
+        except BaseException:
+            self.release()
+            raise
+
+    def _own(self, obj: Any) -> Any:
+        self._objects.append(obj)
+        return obj
+
+    def use(self) -> None:
+        """Bind the framebuffer (its viewport: the whole target)."""
+        self.fbo.use()
+
+    def clear(self) -> None:
+        """Every attachment to 0 (background), the depth buffer to the far plane."""
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+
+    def read(self, name: str) -> NDArray[Any]:
+        """The attachment of AOV ``name``: (h, w) for one component, else (h, w, components);
+        uint32 or float32 as declared; row 0 at the top."""
+        out = next((o for o in AOV_OUTPUTS if o.name == name), None)
+        if out is None:
+            raise ValueError(f"no label output {name!r} (the outputs are {', '.join(o.name for o in AOV_OUTPUTS)})")
+        w, h = self.size
+        raw = self.fbo.read(attachment=out.location, components=out.components, dtype=out.dtype, alignment=1)
+        image = np.frombuffer(raw, np.dtype(f"<{out.dtype}")).reshape(h, w, out.components)[::-1]
+        return np.ascontiguousarray(image[..., 0] if out.components == 1 else image)
+
+    def release(self) -> None:
+        """Release the framebuffer and its attachments (idempotent; safe after the context was
+        released)."""
+        if self._objects and context_alive(self.ctx):
+            self.ctx.detect_framebuffer(0).use()
+        while self._objects:
+            self._objects.pop().release()
+
+    def __enter__(self) -> AovTarget:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()

@@ -39,7 +39,8 @@ from leafview.core.limits import MIN_FRAME_RATIO
 from leafview.core.params import LeafParams, ParamError
 from leafview.deform.surface import evaluate, grid_uv
 
-__all__ = ["VIEWS", "Camera", "frame_view", "check_framable", "check_leaf_framable", "MAX_FRAME_REACH"]
+__all__ = ["VIEWS", "Camera", "frame_view", "check_framable", "check_leaf_framable", "MAX_FRAME_REACH",
+           "intrinsics", "CV_FROM_GL"]
 
 MAX_FRAME_REACH = 1e18     # farthest framed point from the origin (its square must fit float32)
 
@@ -79,6 +80,52 @@ def top_down(center: ArrayLike, z_top: float, half_w: float, half_h: float, dept
     proj = pyrr.matrix44.create_orthogonal_projection(-half_w, half_w, -half_h, half_h, 0.01, depth,
                                                       dtype=np.float64).T
     return Camera(view, proj, np.array([0.0, 0.0, -1.0, 0.0]), False)
+
+
+CV_FROM_GL = np.diag([1.0, -1.0, -1.0, 1.0])
+"""Camera axes from OpenGL's (x right, y up, z backwards) to OpenCV's (x right, y down, z forward)."""
+
+
+def intrinsics(camera: Camera, size: tuple[int, int]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The pinhole model of a perspective ``camera`` drawing an image of ``size`` = (w, h), in the
+    OpenCV convention: ``(K, world_from_camera)``, both float64.
+
+    Convention, exactly:
+
+    * camera axes: x right, y down, z forward (the optical axis); ``world_from_camera`` (4×4)
+      maps camera to world coordinates, its columns are the axes and the centre in world space
+      (``inv(camera.view) @ CV_FROM_GL``).
+    * pixels, as OpenCV has them: the centre of pixel (column ``i``, row ``j``; row 0 at the top,
+      as every readback of leafview) is at image coordinates ``(i, j)``, and the pixel covers
+      ``[i - 0.5, i + 0.5) × [j - 0.5, j + 0.5)``. A point ``X`` in camera coordinates lands at
+      ``(x, y) = (K @ X)[:2] / X[2]`` (what ``cv2.projectPoints`` gives), inside pixel
+      ``(round(x), round(y))``; a centred projection has ``cx = (w - 1) / 2``, ``cy = (h - 1) / 2``.
+    * ``K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]`` in pixels: ``fx = P[0,0] w / 2``,
+      ``fy = P[1,1] h / 2``, ``cx = (1 - P[0,2]) w / 2 - 1/2``, ``cy = (1 + P[1,2]) h / 2 - 1/2``
+      from the projection matrix ``P = camera.proj`` (an off-centre frustum moves the principal
+      point).
+      ``X[2]`` is the depth along the optical axis, the ``depth`` of :mod:`leafview.gpu.aov`.
+
+    Raises ValueError for an orthographic camera (no pinhole model: points map to pixels by
+    ``camera.proj @ camera.view`` alone) or a projection with skew or without the pinhole's last
+    row ``(0, 0, -1, 0)``.
+    """
+    if not camera.perspective:
+        raise ValueError("intrinsics: an orthographic camera has no pinhole model (K); "
+                         "project with camera.proj @ camera.view instead")
+    w, h = float(size[0]), float(size[1])
+    if not (w > 0 and h > 0):
+        raise ValueError(f"intrinsics: size must be positive, got {size!r}")
+    p = np.asarray(camera.proj, np.float64)
+    if not (np.allclose(p[3], (0.0, 0.0, -1.0, 0.0)) and p[0, 1] == 0.0 and p[1, 0] == 0.0
+            and p[0, 3] == 0.0 and p[1, 3] == 0.0):
+        raise ValueError("intrinsics: the projection is not a pinhole perspective (skew, a shifted "
+                         "eye or a last row other than (0, 0, -1, 0))")
+    k = np.array([[p[0, 0] * w / 2.0, 0.0, (1.0 - p[0, 2]) * w / 2.0 - 0.5],
+                  [0.0, p[1, 1] * h / 2.0, (1.0 + p[1, 2]) * h / 2.0 - 0.5],
+                  [0.0, 0.0, 1.0]])
+    world_from_camera = np.linalg.inv(np.asarray(camera.view, np.float64)) @ CV_FROM_GL
+    return k, world_from_camera
 
 
 def frame_view(view: str, points: NDArray[np.float64], size: tuple[int, int]) -> Camera:
