@@ -54,6 +54,8 @@ BASE = "base"
 LAYERS: list[tuple[str, str]] = [
     ("leafview.cli", "one module per sub-command"),
     ("leafview.bench", "one module per benchmark table"),
+    ("leafview.dataset", "labelled datasets: layouts, COCO, local and Ray engines"),
+    ("leafview.notebook", "Jupyter: LeafWidget, thumbnails for _repr_png_"),
     ("leafview.app", "the viewer: glfw window, imgui panel, overlays"),
     ("leafview.export", "glTF, OBJ/PLY and USD writers; images"),
     ("leafview.gpu", "moderngl: layout, shader loading, passes, renderers"),
@@ -73,7 +75,8 @@ LEFT_TARGETS = ("leafview.core", "leafview.inputs", BASE)        # arcs into the
 
 # one colour per importing layer, so that an arc and its count can be told from their neighbours
 COLOURS = {
-    API: "#6a3d9a", "leafview.cli": "#1f78b4", "leafview.bench": "#b15928", "leafview.app": "#e31a1c",
+    API: "#6a3d9a", "leafview.cli": "#1f78b4", "leafview.bench": "#b15928", "leafview.dataset": "#7b4f9d",
+    "leafview.notebook": "#5d7c1f", "leafview.app": "#e31a1c",
     "leafview.export": "#e08000", "leafview.gpu": "#2d8f2d", "leafview.scene": "#8c6d1f",
     "leafview.botany": "#138a6a", "leafview.deform": "#6a5acd", "leafview.core": "#c2185b",
     "leafview.inputs": "#00838f", BASE: "#666666",

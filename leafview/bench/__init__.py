@@ -1,6 +1,6 @@
 """``leafview bench``: one module per benchmark table, each with ``run(quick, ctx) -> dict`` and
-``format_table(res) -> str`` (:mod:`.core`, :mod:`.scene`, :mod:`.export`, :mod:`.shapes`); the
-measurements two tables share (:mod:`.instancing`: parameters against baked meshes;
+``format_table(res) -> str`` (:mod:`.core`, :mod:`.scene`, :mod:`.export`, :mod:`.shapes`,
+:mod:`.dataset`); the measurements two tables share (:mod:`.instancing`: parameters against baked meshes;
 :mod:`.latency`: the viewer's edit latency); and one timing helper for all (:mod:`.timing`). The
 command that runs them is :mod:`leafview.cli.bench`.
 

@@ -42,6 +42,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "morph": ("leafview.cli.morph", "morph one leaf shape into another: frames, contact sheet, smoothness"),
     "scene": ("leafview.cli.scene", "render, save, export or view a scene of many leaves"),
     "shapes": ("leafview.cli.shapes", "list or render the botanical shape catalogue, or a multilobed leaf"),
+    "dataset": ("leafview.cli.dataset", "render a synthetic dataset with exact labels (COCO, depth, normals, uv)"),
 }
 
 

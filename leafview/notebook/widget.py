@@ -22,10 +22,10 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
-import ipywidgets  # type: ignore[import-untyped]
+import ipywidgets
 import numpy as np
 from IPython.display import display
-from jupyter_rfb import RemoteFrameBuffer  # type: ignore[import-untyped]
+from jupyter_rfb import RemoteFrameBuffer
 from numpy.typing import NDArray
 
 from leafview.app.handles import to_world
