@@ -27,7 +27,8 @@ from leafview.deform.surface import evaluate, grid_uv, normals
 from leafview.errors import NonFiniteMesh
 from leafview.export import export_leaf, export_leaves
 from leafview.scene.camera import check_framable, check_leaf_framable
-from leafview.scene.spec import SceneSpec, load_scene
+from leafview.scene.plants import PLANT_RANGES
+from leafview.scene.spec import SceneSpec, build_scene, load_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 OVATE = ROOT / "assets/presets/ovate.toml"
@@ -336,3 +337,24 @@ def test_an_invalid_compact_preset_is_named_by_field(tmp_path):
     (tmp_path / "c.leaf.json").write_text(json.dumps(leaf))
     with pytest.raises(ParamError, match=r"'c\.leaf\.json' is not a usable leaf preset: an invalid value at omega\[7\]$"):
         load_scene(_scene(tmp_path, "c.leaf.json"))
+
+
+@pytest.mark.parametrize("layout", ["plant", "field"])
+def test_every_plant_setting_at_its_limits_expands_to_finite_leaves(tmp_path, layout):
+    """Each numeric [plant] setting at the bounds PLANT_RANGES accepts (lengths down to
+    MIN_LENGTH) grows finite leaf matrices; a positive denormal length (5e-324 made the growth
+    arithmetic divide by zero) is refused naming the field."""
+    for name, (lo, hi, _, integer) in PLANT_RANGES.items():
+        for value in (lo, hi):
+            value = int(value) if integer else value
+            doc = {"schema": 1, "scene": {"leaves": 40, "layout": layout}, "plant": {name: value},
+                   "species": [{"preset": "ovate"}]}
+            path = tmp_path / "s.json"
+            path.write_text(json.dumps(doc))
+            scene = build_scene(load_scene(path))
+            assert np.isfinite(scene.matrices).all(), f"plant.{name} = {value}"
+    path = tmp_path / "tiny.json"
+    path.write_text(json.dumps({"schema": 1, "scene": {"leaves": 10}, "plant": {"height": 5e-324},
+                                "species": [{"preset": "ovate"}]}))
+    with pytest.raises(ParamError, match=r"plant\.height: must be ≥ 1e-06"):
+        load_scene(path)

@@ -58,7 +58,8 @@ from leafview.scene.stems import (
 )
 
 __all__ = ["PlantSpec", "Placement", "grow_plant", "scatter", "PHYLLOTAXIS", "LAYOUTS",
-           "GOLDEN_ANGLE", "divergence", "PETIOLE_LIMIT", "PETIOLE_SIDES", "LEAF_BOX", "PLANT_RANGES"]
+           "GOLDEN_ANGLE", "divergence", "PETIOLE_LIMIT", "PETIOLE_SIDES", "LEAF_BOX", "PLANT_RANGES",
+           "MIN_LENGTH"]
 
 PHYLLOTAXIS = ("golden", "alternate", "opposite", "whorled")
 LAYOUTS = ("plant", "field", "hedge")
@@ -87,19 +88,23 @@ def _num(name: str, value: Any, lo: float | None = None, hi: float | None = None
     return v
 
 
+# The shortest length a plant setting may have, in leaf lengths (the smallest transform scale):
+# a positive length closer to 0 (5e-324) underflows to 0 or inf in the growth arithmetic.
+MIN_LENGTH = 1e-6
+
 # The numeric settings of PlantSpec: name -> (lo, hi, open_lo, integer). The loader and the
 # published scene schema (leafview.scene.schema) both read this table.
 PLANT_RANGES: dict[str, tuple[float | None, float | None, bool, bool]] = {
-    "whorl": (2, 12, False, True), "height": (0, 1e4, True, False),
+    "whorl": (2, 12, False, True), "height": (MIN_LENGTH, 1e4, False, False),
     "branches": (0, 500, False, True), "branch_angle": (0, 120, False, False),
-    "leaf_size": (0, 1e3, True, False), "size_falloff": (0, 0.95, False, False),
+    "leaf_size": (MIN_LENGTH, 1e3, False, False), "size_falloff": (0, 0.95, False, False),
     "petiole": (0, 10, False, False), "tilt": (-90, 90, False, False),
     "light_following": (0, 1, False, False), "tilt_top": (-90, 90, False, False),
-    "petiole_angle": (5, 175, False, False), "branch_length": (0, 3, True, False),
+    "petiole_angle": (5, 175, False, False), "branch_length": (MIN_LENGTH, 3, False, False),
     "crown_base": (0, 0.95, False, False), "twigs": (-1, 200, False, True),
-    "twig_angle": (0, 120, False, False), "twig_length": (0, 3, True, False),
-    "internode": (0, 100, True, False), "gravitropism": (-1, 1, False, False),
-    "lean": (0, 45, False, False), "radius": (0, 1e3, True, False),
+    "twig_angle": (0, 120, False, False), "twig_length": (MIN_LENGTH, 3, False, False),
+    "internode": (MIN_LENGTH, 100, False, False), "gravitropism": (-1, 1, False, False),
+    "lean": (0, 45, False, False), "radius": (MIN_LENGTH, 1e3, False, False),
     "taper": (0, 0.99, False, False), "variation": (0, 0.5, False, False),
     "leaf_jitter": (0, 90, False, False),
 }
