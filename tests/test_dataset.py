@@ -24,12 +24,13 @@ from pycocotools.coco import COCO
 
 from leafview.cli import main
 from leafview.core.io import load_leaves
-from leafview.dataset import DatasetReport, ShardFailed, make_dataset
-from leafview.dataset.engines import CRASH_ENV
+from leafview.dataset import DatasetReport, ShardFailed, engines, make_dataset
+from leafview.dataset.engines import CRASH_ENV, RayShardWorker
 from leafview.dataset.labels import mask_bbox
 from leafview.dataset.layouts import setup_image, split_of
 from leafview.dataset.recipe import Recipe, load_species
 from leafview.dataset.writer import FOLDERS, disjoint_groups, image_files
+from leafview.errors import GLUnavailable
 
 pytestmark = [pytest.mark.gl, pytest.mark.filterwarnings("ignore:__array__ implementation:DeprecationWarning")]
 
@@ -150,8 +151,7 @@ def test_one_and_two_workers_write_identical_bytes(base, tmp_path):
 
 @pytest.mark.slow
 def test_ray_engine_writes_identical_bytes(base, tmp_path):
-    if importlib.util.find_spec("ray") is None:
-        require_or_skip('Ray is not installed (pip install "leafview[ray]")')
+    assert importlib.util.find_spec("ray") is not None, 'Ray is part of the [test] extra: pip install -e ".[test]"'
     out, _ = base
     report = make_dataset(tmp_path / "ray", engine="ray", workers=2, **ARGS)
     assert report.images_rendered == 4 and report.engine == "ray"
@@ -292,3 +292,26 @@ def test_bench_dataset_quick_run_fills_the_table(gl):
     assert res["threads"]["1"] >= res["threads"]["2"] >= 1
     assert "ratio 2 ÷ 1 workers" in format_table(res)
     json.dumps(res, allow_nan=False)
+
+
+def test_a_ray_actor_given_a_gpu_draws_on_that_egl_device(base, tmp_path, monkeypatch):
+    """An actor with num_gpus takes the EGL device of the GPU id Ray assigned it (EGL lists every
+    GPU of the node whatever CUDA_VISIBLE_DEVICES says). Here Ray is faked: id 0 is llvmpipe's one
+    EGL device; id 7 does not exist and is named in the error."""
+    class FakeRay:
+        ids: list[str] = ["0"]
+
+        def get_gpu_ids(self) -> list[str]:
+            return self.ids
+
+    fake = FakeRay()
+    monkeypatch.setattr(engines, "import_ray", lambda: fake)
+    recipe = Recipe(count=1, species=load_species("ovate"), leaves=2, layout="tray", size=(32, 24))
+    worker = RayShardWorker(str(tmp_path), recipe, None, gpu_device=True)
+    try:
+        assert worker.gl_renderer() == base[1].gl_renderer
+    finally:
+        worker.renderer.release()
+    fake.ids = ["7"]
+    with pytest.raises(GLUnavailable, match="EGL device 7"):
+        RayShardWorker(str(tmp_path), recipe, None, gpu_device=True)

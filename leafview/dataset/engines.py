@@ -304,13 +304,21 @@ def check_address(address: str, timeout: float = 5.0) -> None:
         raise DatasetError(f"--address {address}: no Ray cluster can be reached there ({reason.lower()})") from None
 
 
+def _assigned_gpu() -> int | None:
+    """The EGL device of a Ray actor given a GPU: the first GPU id Ray assigned to it. Ray sets
+    ``CUDA_VISIBLE_DEVICES`` for CUDA, but EGL enumerates every GPU of the node, so the context is
+    asked for that device by index (None when Ray assigned none)."""
+    ids = import_ray().get_gpu_ids()
+    return int(ids[0]) if ids else None
+
+
 class RayShardWorker:
     """The Ray actor: one context, shards on request (see :class:`RayEngine`)."""
 
-    def __init__(self, out: str, recipe: Recipe, threads: int | None) -> None:
+    def __init__(self, out: str, recipe: Recipe, threads: int | None, gpu_device: bool = False) -> None:
         _set_threads(threads)
         self.out = Path(out)
-        self.renderer = ImageRenderer(recipe)
+        self.renderer = ImageRenderer(recipe, device=_assigned_gpu() if gpu_device else None)
 
     def gl_renderer(self) -> str:
         return self.renderer.gl_renderer
@@ -355,7 +363,7 @@ class RayEngine:
         self._actor_cls = self.ray.remote(num_cpus=1, num_gpus=self.gpus, max_restarts=0)(RayShardWorker)
 
     def _actor(self) -> Any:
-        return self._actor_cls.remote(str(self.out), self.recipe, self.threads)
+        return self._actor_cls.remote(str(self.out), self.recipe, self.threads, self.gpus > 0)
 
     def run(self, shards: Sequence[int], on_image: Callable[[], None] | None = None) -> EngineResult:
         ray = self.ray

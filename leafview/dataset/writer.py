@@ -212,13 +212,14 @@ class RenderedImage:
 
 
 class ImageRenderer:
-    """One GL context (headless EGL) and its shared resources, rendering images of one recipe.
-    Create it after ``LP_NUM_THREADS`` is set: llvmpipe reads it when the context is made."""
+    """One GL context (headless EGL; ``device``: the EGL device index, None: the default) and its
+    shared resources, rendering images of one recipe. Create it after ``LP_NUM_THREADS`` is set:
+    llvmpipe reads it when the context is made."""
 
-    def __init__(self, recipe: Recipe, ctx: moderngl.Context | None = None) -> None:
+    def __init__(self, recipe: Recipe, ctx: moderngl.Context | None = None, device: int | None = None) -> None:
         self.recipe = recipe
         self._own_ctx = ctx is None
-        self.ctx = create_headless_context() if ctx is None else ctx
+        self.ctx = create_headless_context(device=device) if ctx is None else ctx
         self.resources = GpuResources(self.ctx)
 
     @property

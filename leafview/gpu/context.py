@@ -22,15 +22,22 @@ _EGL_HELP = ("install EGL and Mesa's drivers (Debian/Ubuntu: apt-get install lib
              "the driver's libEGL_nvidia)")
 
 
-def create_headless_context(require: int = REQUIRED_GL) -> moderngl.Context:
-    """A standalone EGL context (no display needed). Raises :class:`GLUnavailable` with a one-line
-    message: what failed and what to install."""
+def create_headless_context(require: int = REQUIRED_GL, device: int | None = None) -> moderngl.Context:
+    """A standalone EGL context (no display needed). ``device``: the index of the EGL device
+    (``EGL_EXT_device_enumeration`` order; on an NVIDIA node the GPUs, in the order MuJoCo and
+    robosuite also assume to be CUDA's); None: EGL's default device. Raises
+    :class:`GLUnavailable` with a one-line message: what failed and what to install."""
     settings: dict[str, Any] = {"backend": "egl"}
+    if device is not None:
+        if isinstance(device, bool) or not isinstance(device, int) or device < 0:
+            raise GLUnavailable(f"EGL device must be an index ≥ 0, got {device!r}")
+        settings["device_index"] = device
     try:
         ctx = moderngl.create_standalone_context(require=require, **settings)
     except Exception as exc:  # glcontext raises plain Exceptions with loader messages
         reason = " ".join(str(exc).split()) or type(exc).__name__
-        raise GLUnavailable(f"no OpenGL {require // 100}.{require % 100 // 10} context through EGL "
+        where = f" on EGL device {device}" if device is not None else ""
+        raise GLUnavailable(f"no OpenGL {require // 100}.{require % 100 // 10} context through EGL{where} "
                             f"({reason}); {_EGL_HELP}") from None
     return ctx
 
