@@ -9,7 +9,7 @@ one place and released in one place.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Self
 
 import moderngl
 import numpy as np
@@ -41,7 +41,40 @@ def unpremultiply(img: NDArray[np.uint8]) -> NDArray[np.uint8]:
     return out
 
 
-class RenderTarget:
+class _Framebuffers:
+    """What every render target shares: the GL objects it owns (released in reverse order, once),
+    binding ``fbo`` to draw into, and use as a context manager. ``release()`` first binds
+    framebuffer 0: moderngl re-binds the *current* framebuffer after creating a new one, so a
+    deleted-but-current framebuffer would make the next ``ctx.framebuffer()`` raise
+    GL_INVALID_OPERATION."""
+
+    ctx: moderngl.Context
+    fbo: moderngl.Framebuffer
+    _objects: list[Any]
+
+    def _own(self, obj: Any) -> Any:
+        self._objects.append(obj)
+        return obj
+
+    def use(self) -> None:
+        """Bind the framebuffer to draw into (its viewport: the whole target)."""
+        self.fbo.use()
+
+    def release(self) -> None:
+        """Release the framebuffers and attachments (idempotent; safe after the context was released)."""
+        if self._objects and context_alive(self.ctx):
+            self.ctx.detect_framebuffer(0).use()
+        while self._objects:
+            self._objects.pop().release()
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+class RenderTarget(_Framebuffers):
     """An RGBA (8-bit, or float32 with ``linear``) + depth framebuffer of ``size``; with
     ``samples`` > 0 the draws go to a multisampled framebuffer that :meth:`resolve` copies into
     the single-sample one.
@@ -73,13 +106,6 @@ class RenderTarget:
             self.release()
             raise
 
-    def _own(self, obj: Any) -> Any:
-        self._objects.append(obj)
-        return obj
-
-    def use(self) -> None:
-        """Bind the framebuffer to draw into (its viewport: the whole target)."""
-        self.fbo.use()
 
     def clear(self, rgba: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> None:
         r, g, b, a = (float(x) for x in rgba)
@@ -103,24 +129,12 @@ class RenderTarget:
         image = np.frombuffer(raw, dtype).reshape(h, w, 4)[::-1]
         return np.ascontiguousarray(image) if copy else image
 
-    def release(self) -> None:
-        """Release the framebuffers (idempotent; safe after the context was released)."""
-        if self._objects and context_alive(self.ctx):
-            self.ctx.detect_framebuffer(0).use()
-        while self._objects:
-            self._objects.pop().release()
-
-    def __enter__(self) -> RenderTarget:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()
 
 
 OffscreenTarget = RenderTarget   # the name the benchmarks and tests know
 
 
-class AovTarget:
+class AovTarget(_Framebuffers):
     """The label pass's framebuffer: one single-sample colour attachment per
     :data:`~leafview.gpu.layout.AOV_OUTPUTS` entry (R32UI instance, R32F depth, RGBA32F normal,
     RG32F uv, at the entry's location) and a depth buffer. No multisampling and no blending, so
@@ -147,13 +161,6 @@ class AovTarget:
             self.release()
             raise
 
-    def _own(self, obj: Any) -> Any:
-        self._objects.append(obj)
-        return obj
-
-    def use(self) -> None:
-        """Bind the framebuffer (its viewport: the whole target)."""
-        self.fbo.use()
 
     def clear(self) -> None:
         """Every attachment to 0 (background), the depth buffer to the far plane."""
@@ -170,16 +177,3 @@ class AovTarget:
         image = np.frombuffer(raw, np.dtype(f"<{out.dtype}")).reshape(h, w, out.components)[::-1]
         return np.ascontiguousarray(image[..., 0] if out.components == 1 else image)
 
-    def release(self) -> None:
-        """Release the framebuffer and its attachments (idempotent; safe after the context was
-        released)."""
-        if self._objects and context_alive(self.ctx):
-            self.ctx.detect_framebuffer(0).use()
-        while self._objects:
-            self._objects.pop().release()
-
-    def __enter__(self) -> AovTarget:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()
