@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-from conftest import require_or_skip
 from pycocotools import mask as mask_utils
 from pycocotools.coco import COCO
 
@@ -31,6 +30,7 @@ from leafview.dataset.layouts import setup_image, split_of
 from leafview.dataset.recipe import Recipe, load_species
 from leafview.dataset.writer import FOLDERS, disjoint_groups, image_files
 from leafview.errors import GLUnavailable
+from tests.conftest import require_or_skip
 
 pytestmark = [pytest.mark.gl, pytest.mark.filterwarnings("ignore:__array__ implementation:DeprecationWarning")]
 
@@ -200,8 +200,8 @@ def test_a_dying_worker_is_retried_once_then_reported(gl, tmp_path, monkeypatch,
 
 
 def _ray_present() -> None:
-    if importlib.util.find_spec("ray") is None:
-        require_or_skip('Ray is not installed (pip install "leafview[ray]")')
+    assert importlib.util.find_spec("ray") is not None, 'Ray is part of the [test] extra: pip install -e ".[test]"'
+
 
 
 @pytest.mark.parametrize("extra, code, words", [
