@@ -13,7 +13,7 @@ The subclasses keep the built-in base they always had (``ValueError`` for bad va
 
 from __future__ import annotations
 
-__all__ = ["LeafviewError", "ParamError", "UsageError", "ExportError", "NonFiniteMesh", "SceneLimitError",
+__all__ = ["one_line", "LeafviewError", "ParamError", "UsageError", "ExportError", "NonFiniteMesh", "SceneLimitError",
            "GpuLimitError", "GLUnavailable", "GLContextLost", "ShaderError", "ImageWriteError"]
 
 
@@ -29,6 +29,16 @@ def shorten(text: str, limit: int) -> str:
     return f"{text[:limit]}… ({len(text) - limit:,} more characters)"
 
 
+def one_line(text: str) -> str:
+    """``text`` with its control characters and line separators written as escapes (``\\n``,
+    ``\\x00``, ``\\u2028``), so that a key or value quoted from a hostile file can never split an
+    error message over several lines."""
+    if text.isprintable():
+        return text
+    return "".join(ch if ch.isprintable() or ch == " " else ch.encode("unicode_escape").decode("ascii")
+                   for ch in text)
+
+
 class LeafviewError(Exception):
     """The base of every error leafview raises on purpose."""
 
@@ -38,10 +48,10 @@ class ParamError(LeafviewError, ValueError):
     ``source`` the file (and ``line:col`` for syntax errors) when known."""
 
     def __init__(self, path: str, message: str, source: str | None = None) -> None:
-        self.path = shorten(path, MAX_PATH_CHARS)
-        self.message = shorten(message, MAX_MESSAGE_CHARS)
-        self.source = source
-        path, message = self.path, self.message
+        self.path = shorten(one_line(path), MAX_PATH_CHARS)
+        self.message = shorten(one_line(message), MAX_MESSAGE_CHARS)
+        self.source = None if source is None else one_line(source)
+        path, message, source = self.path, self.message, self.source
         where = f"{source}: " if source else ""
         what = f"{path}: " if path else ""
         super().__init__(f"{where}{what}{message}")

@@ -187,3 +187,19 @@ def test_png_round_trip_keeps_straight_alpha(gl, tmp_path):
     write_image(tmp_path / "a.png", img)
     back, _ = read_image(tmp_path / "a.png")
     np.testing.assert_array_equal(back, img)
+
+
+@pytest.mark.parametrize("key", ["\n", "a\rb", "\x00", "x\u2028y", "\x1b[31m"])
+def test_a_control_character_in_a_key_stays_escaped_in_one_line(tmp_path, monkeypatch, capsys, key):
+    """Keys and values quoted from a file are written with escapes: a key of "\\n" (found by the
+    long fuzz run in a landmark file) split the error over two lines."""
+    monkeypatch.chdir(tmp_path)
+    doc = LeafParams.load(builtin_presets()["ovate"]).to_dict()
+    doc[key] = 1
+    (tmp_path / "bad.json").write_text(json.dumps(doc))
+    assert main(["render", "bad.json", "-o", "x.png"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.endswith("\n") and "\r" not in err and "\x00" not in err, repr(err)
+    assert "\u2028" not in err and "\x1b" not in err
+    assert key.encode("unicode_escape").decode() in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.json"]

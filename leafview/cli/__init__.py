@@ -27,6 +27,7 @@ from leafview.errors import (
     ParamError,
     SceneLimitError,
     UsageError,
+    one_line,
 )
 
 __all__ = ["COMMANDS", "build_parser", "main"]
@@ -75,16 +76,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         code: int = importlib.import_module(COMMANDS[args.command][0]).run(args)
         return code
     except (UsageError, ParamError, SceneLimitError) as exc:
-        print(f"leafview {args.command}: error: {exc}", file=sys.stderr)
+        print(f"leafview {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_USAGE
     except KeyboardInterrupt:
         print("leafview: interrupted; no partial files were left", file=sys.stderr)
         return EXIT_INTERRUPTED
     except Terminated as exc:   # SIGTERM/SIGHUP while writing: temporary files removed
-        print(f"leafview: {exc}; no partial files were left", file=sys.stderr)
+        print(f"leafview: {one_line(str(exc))}; no partial files were left", file=sys.stderr)
         return int(exc.code) if isinstance(exc.code, int) else EXIT_FAILURE
     except (GLUnavailable, GLContextLost, ImageWriteError, OutputError) as exc:   # a message, not a traceback
-        print(f"leafview {args.command}: {exc}", file=sys.stderr)
+        print(f"leafview {args.command}: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_FAILURE
 
 

@@ -15,7 +15,7 @@ import sys
 from typing import Any
 
 from leafview.cli.args import EXIT_OK, EXIT_USAGE
-from leafview.errors import GLUnavailable
+from leafview.errors import GLUnavailable, one_line
 
 __all__ = ["SUITES", "add_arguments", "run"]
 
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
             if not args.json:
                 print(table.format_table(res), flush=True)
     except GLUnavailable as exc:
-        print(f"leafview bench: {exc}", file=sys.stderr)
+        print(f"leafview bench: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_USAGE
     if args.json:
         print(json.dumps(results[names[0]] if len(names) == 1 else results, indent=2, allow_nan=False))

@@ -25,6 +25,7 @@ from leafview.dataset.recipe import (
     parse_range,
     parse_split,
 )
+from leafview.errors import one_line
 
 __all__ = ["add_arguments", "run"]
 
@@ -92,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
                            sun_elevation=ranges.get("sun_elevation", DEFAULT_RANGES["sun_elevation"]),
                            light_intensity=ranges.get("light_intensity", DEFAULT_RANGES["light_intensity"]))
     except DatasetError as exc:
-        print(f"leafview dataset: {exc}", file=sys.stderr)
+        print(f"leafview dataset: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_FAILURE
     splits = ", ".join(f"{k} {v}" for k, v in rep.splits.items())
     rate = f", {rep.images_per_s:.2f} images/s" if rep.images_rendered else ""
