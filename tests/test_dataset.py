@@ -294,7 +294,7 @@ def test_bench_dataset_quick_run_fills_the_table(gl):
     json.dumps(res, allow_nan=False)
 
 
-def test_a_ray_actor_given_a_gpu_draws_on_that_egl_device(base, tmp_path, monkeypatch):
+def test_a_ray_actor_given_a_gpu_draws_on_that_egl_device(gl, base, tmp_path, monkeypatch):
     """An actor with num_gpus takes the EGL device of the GPU id Ray assigned it (EGL lists every
     GPU of the node whatever CUDA_VISIBLE_DEVICES says). Here Ray is faked: id 0 is llvmpipe's one
     EGL device; id 7 does not exist and is named in the error."""
@@ -307,11 +307,14 @@ def test_a_ray_actor_given_a_gpu_draws_on_that_egl_device(base, tmp_path, monkey
     fake = FakeRay()
     monkeypatch.setattr(engines, "import_ray", lambda: fake)
     recipe = Recipe(count=1, species=load_species("ovate"), leaves=2, layout="tray", size=(32, 24))
-    worker = RayShardWorker(str(tmp_path), recipe, None, gpu_device=True)
     try:
-        assert worker.gl_renderer() == base[1].gl_renderer
+        worker = RayShardWorker(str(tmp_path), recipe, None, gpu_device=True)   # its own context, made current
+        try:
+            assert worker.gl_renderer() == base[1].gl_renderer
+        finally:
+            worker.renderer.release()
+        fake.ids = ["7"]
+        with pytest.raises(GLUnavailable, match="EGL device 7"):
+            RayShardWorker(str(tmp_path), recipe, None, gpu_device=True)
     finally:
-        worker.renderer.release()
-    fake.ids = ["7"]
-    with pytest.raises(GLUnavailable, match="EGL device 7"):
-        RayShardWorker(str(tmp_path), recipe, None, gpu_device=True)
+        gl.ctx.__enter__()   # the shared test context current again for the tests that follow
