@@ -11,6 +11,7 @@ import io
 import json
 import os
 import shutil
+import signal
 import sys
 import time
 from pathlib import Path
@@ -153,9 +154,12 @@ def test_one_and_two_workers_write_identical_bytes(base, tmp_path):
 def test_ray_engine_writes_identical_bytes(base, tmp_path):
     assert importlib.util.find_spec("ray") is not None, 'Ray is part of the [test] extra: pip install -e ".[test]"'
     out, _ = base
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     report = make_dataset(tmp_path / "ray", engine="ray", workers=2, **ARGS)
     assert report.images_rendered == 4 and report.engine == "ray"
     assert digests(tmp_path / "ray") == digests(out)
+    # the local Ray is shut down and its signal handlers are gone again
+    assert {sig: signal.getsignal(sig) for sig in handlers} == handlers
 
 
 def test_resume_renders_only_the_missing_shard(base, tmp_path):

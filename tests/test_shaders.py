@@ -46,6 +46,18 @@ def test_error_in_the_main_file_after_an_include(gl, tmp_path):
     assert info.value.stage == "fragment" and info.value.location == "m.frag:4"
 
 
+def test_error_after_an_include_in_a_skipped_branch(gl, tmp_path):
+    """The #line after an #include inside an #ifdef that is not taken is ignored by the compiler;
+    the loader restates the position after #else/#endif, so the line is still right."""
+    _write(tmp_path, {"m.frag": '#version 450\n#ifdef NOT_SET\n#include "x.glsl"\n#else\nout vec4 c;\n#endif\n'
+                                "// a comment\n// another\nvoid main() { c = nope; }\n",
+                      "x.glsl": "out vec4 c;\nfloat x() { return 1.0; }\n// 3\n// 4\n// 5\n",
+                      "ok.vert": "#version 450\nvoid main() { gl_Position = vec4(0.0); }\n"})
+    with pytest.raises(ShaderError) as info:
+        build_program(gl.ctx, "ok.vert", "m.frag", root=tmp_path)
+    assert info.value.stage == "fragment" and info.value.location == "m.frag:9", str(info.value)
+
+
 def test_compute_error_and_link_error(gl, tmp_path):
     _write(tmp_path, {"c.comp": "#version 450\nlayout(local_size_x = 1) in;\nvoid main() {\n  oops;\n}\n",
                       "v.vert": "#version 450\nout vec3 x;\nvoid main() { x = vec3(1.0); gl_Position = vec4(0.0); }\n",

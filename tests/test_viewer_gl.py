@@ -221,7 +221,8 @@ def test_hot_reload_keeps_the_old_program_on_error(gl, tmp_path, monkeypatch):
         frag = src / "leaf.frag"
         text = frag.read_text()
         lines = text.splitlines()
-        broken_line = next(i for i, line in enumerate(lines) if line.startswith("void main")) + 2
+        # the drawing program's main (the last one: the label pass's main comes first, under LEAF_AOV)
+        broken_line = max(i for i, line in enumerate(lines) if line.startswith("void main")) + 2
         lines.insert(broken_line - 1, "    this is not GLSL;")
         frag.write_text("\n".join(lines) + "\n")
         still = scene(frame(v), v)

@@ -31,11 +31,14 @@ in one place, :func:`_crash_hook`, when a worker starts a shard, and does nothin
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import logging
 import multiprocessing
 import os
+import signal
 import socket
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
@@ -346,6 +349,7 @@ class RayEngine:
         if address is not None:
             check_address(address)
         self._started = False
+        self._signals = _signal_handlers()   # ray.init installs its own SIGTERM/SIGINT handlers
         if not self.ray.is_initialized():
             options: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False,
                                        "logging_level": logging.ERROR, "configure_logging": False}
@@ -424,6 +428,27 @@ class RayEngine:
         if self._started:
             self.ray.shutdown()
             self._started = False
+            _restore_signal_handlers(self._signals)
+
+
+_SIGNALS = tuple(s for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGTERM", "SIGHUP")) if s is not None)
+
+
+def _signal_handlers() -> dict[int, Any]:
+    """The handlers in place now (main thread), so that those Ray installs can be undone."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {sig: signal.getsignal(sig) for sig in _SIGNALS}
+
+
+def _restore_signal_handlers(saved: dict[int, Any]) -> None:
+    """Put back the handlers of :func:`_signal_handlers`: after a local Ray is shut down, Ctrl-C and
+    SIGTERM act in this process as they did before (leafview's output layer takes only signals
+    left at their default)."""
+    for sig, handler in saved.items():
+        if handler is not None:
+            with contextlib.suppress(ValueError, OSError):
+                signal.signal(sig, handler)
 
 
 def _ray_reason(exc: BaseException) -> str:

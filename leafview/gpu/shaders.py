@@ -27,6 +27,7 @@ __all__ = ["ShaderError", "ShaderSource", "preprocess", "build_program", "build_
 _LINE_STRIDE = 100_000
 _MAX_DEPTH = 8
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"\s*$')
+_CONDITIONAL = re.compile(r"^\s*#\s*(else|elif|endif)\b")
 _VERSION = re.compile(r"^\s*#\s*version\b")
 # Mesa "0:12(5): error: ..."; NVIDIA "0(12) : error C1008: ..."; AMD/Intel "ERROR: 0:12: ..."
 _LOG_LINE = re.compile(r"(?:^|\s)(\d+)(?::(\d+)\((\d+)\)|\((\d+)\)|:(\d+):)")
@@ -113,6 +114,11 @@ def preprocess(name: str, *, defines: Mapping[str, object] | None = None, root: 
                 out.append(line)
                 for key, value in injected.items():
                     out.append(f"#define {key} {value}")
+                out.append(f"#line {idx * _LINE_STRIDE + n + 1}")
+            elif _CONDITIONAL.match(line):
+                # a #line inside a skipped branch (after an #include there) is ignored by the
+                # compiler: restate the position after every #else/#elif/#endif
+                out.append(line)
                 out.append(f"#line {idx * _LINE_STRIDE + n + 1}")
             else:
                 out.append(line)
