@@ -58,9 +58,11 @@ from tests.conftest import require_or_skip
 ROOT = Path(__file__).resolve().parent.parent
 DRIVER = r"""
 import os, signal, sys, time
-# a parent started with nohup passes SIGHUP on as ignored, and leafview leaves a disposition it
-# did not set alone: start from the default, as a command typed in a terminal does
+# a parent started with nohup passes SIGHUP on as ignored, and one started in the background by a
+# shell without job control SIGINT (Python then installs no KeyboardInterrupt handler); leafview
+# leaves a disposition it did not set alone: start from what a command typed in a terminal has
 signal.signal(signal.SIGHUP, signal.SIG_DFL)
+signal.signal(signal.SIGINT, signal.default_int_handler)
 delay = float(os.environ.get("LV_SLOW_WRITE", "0"))
 if delay:
     real = os.write
