@@ -147,6 +147,7 @@ def test_argparse_errors_exit_2(tmp_path, monkeypatch, capsys):
     ["scene", "--leaves", "3", "--export", ""],
     ["scene", "--leaves", "3", "--view", "--screenshot", ""],
     ["view", "ovate", "--screenshot", ""],
+    ["dataset", "--count", "1", "-o", ""],
 ])
 def test_an_empty_output_path_is_refused_not_read_as_the_current_folder(tmp_path, monkeypatch, capsys, args):
     monkeypatch.chdir(tmp_path)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from leafview.cli.args import EXIT_FAILURE, EXIT_OK, count, image_size, report
+from leafview.cli.args import EXIT_FAILURE, EXIT_OK, count, image_size, output_path, report
 from leafview.dataset import LAYOUTS, DatasetError, make_dataset
 from leafview.dataset.engines import ENGINES
 from leafview.dataset.recipe import (
@@ -44,7 +44,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                      "depth, normals and (u, v) per pixel, COCO instance annotations (RLE masks, boxes, visible "
                      "fraction), per-image cameras (OpenCV K and pose) and leaf sets. The same arguments give "
                      "byte-identical files on any engine and number of workers; a rerun skips finished shards.")
-    p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created if needed)")
+    p.add_argument("-o", "--output", type=output_path, required=True, metavar="DIR",
+                   help="output folder (created if needed)")
     p.add_argument("--count", required=True, metavar="N",
                    type=lambda t: count(t, lo=1, hi=MAX_COUNT, what="images", name="--count"),
                    help=f"number of images (at most {MAX_COUNT:,})")
