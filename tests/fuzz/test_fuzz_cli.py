@@ -371,6 +371,9 @@ OPTIONS = {
     "presets": ["--help", "-q", "x"],
     "view": ["--size", "--frames", "--screenshot", "--dev", "--samples"],
     "bench": ["--json", "--quick", "--bogus"],
+    "dataset": ["-o", "--count", "--leaves", "--layout", "--species", "--size", "--seed", "--elevation", "--azimuth",
+                "--distance", "--sun-elevation", "--light-intensity", "--split", "--shard-size", "--engine",
+                "--workers", "--address", "--gpus-per-worker", "-q"],
 }
 # one argument that makes sure the command refuses before opening a window or measuring
 VIEW_REFUSALS = [["--size", "10x10"], ["--frames", "0"], ["in/missing.toml"], ["--screenshot", "w.jpg"],
@@ -398,6 +401,10 @@ def any_argv(draw: st.DrawFn) -> list[str]:
             tokens += ["--frames", "0"]
     elif command == "morph":
         tokens += ["--frames", draw(st.sampled_from(["2", "0", "x"])), "--fast", "--size", "8"]
+    elif command == "dataset":   # tiny images, at most one image and one local worker (the last value wins)
+        tokens[1:1] = ["-o", "out/ds"]
+        tokens += ["--count", draw(st.sampled_from(["1", "0", "x"])), "--size", "16x16", "--leaves", "2",
+                   "--workers", "1", "--engine", draw(st.sampled_from(["local", "x"]))]   # Ray: tests/test_dataset.py
     elif command == "shapes" and "-o" in tokens and "--names" not in tokens:
         tokens += ["--names", "ovate"]
     return tokens

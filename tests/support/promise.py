@@ -208,7 +208,7 @@ def image_coverage(path: str | os.PathLike[str]) -> float:
 def _check_image(path: Path) -> None:
     pixels, _ = read_image(path)
     a = np.asarray(pixels)
-    if a.ndim != 3 or a.shape[0] < 1 or a.shape[1] < 1 or a.shape[2] not in (3, 4):
+    if a.ndim != 3 or a.shape[0] < 1 or a.shape[1] < 1 or a.shape[2] not in (1, 2, 3, 4):   # 1, 2: dataset labels
         raise ValueError(f"unexpected pixel array {a.shape}")
     _finite(a, "pixels")
 
@@ -364,6 +364,8 @@ def _check_document(path: Path) -> None:
         return
     if "species" in doc:
         load_scene(path)
+    elif "format" in doc and "arguments" in doc:   # a dataset's manifest (dataset.json)
+        return
     elif "leafview" in doc or "schema" in doc and "shape" in doc:
         load_leaves(path)
 
@@ -387,6 +389,8 @@ def file_problem(path: str | os.PathLike[str]) -> str | None:
             _check_usd(p)
         elif suffix in (".json", ".toml"):
             _check_document(p)
+        elif suffix == ".txt":   # a dataset's split lists: file stems, one a line
+            p.read_text(encoding="utf-8")
         else:
             return f"{p.name}: a file of unexpected type"
     except Exception as exc:   # any failure to read back is the finding
