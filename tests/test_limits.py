@@ -358,3 +358,15 @@ def test_every_plant_setting_at_its_limits_expands_to_finite_leaves(tmp_path, la
                                 "species": [{"preset": "ovate"}]}))
     with pytest.raises(ParamError, match=r"plant\.height: must be ≥ 1e-06"):
         load_scene(path)
+
+
+def test_species_weights_at_the_float_limit_still_draw_species(tmp_path):
+    """Weights are relative: two of 1e308 summed to inf and made the species draw raise
+    (found by the long fuzz run); any positive finite weights give probabilities."""
+    path = tmp_path / "s.toml"
+    path.write_text('schema = 1\nspecies = [\n    { preset = "ovate", weight = 1e+308 },\n    { preset = "ovate" },\n'
+                    '    { preset = "lanceolate", weight = 1e+308 },\n    { preset = "ovate", weight = 5e-324 },\n]\n\n'
+                    '[scene]\nleaves = 400\nplants = 40\nlayout = "field"\n')
+    scene = build_scene(load_scene(path))
+    used = set(np.unique(scene.species_id).tolist())
+    assert used == {0, 2}, used   # the two heavy species; the others (1e-308 of their weight) never

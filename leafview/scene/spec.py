@@ -417,7 +417,9 @@ def build_scene(spec: SceneSpec) -> Scene:
     n = len(placement)
     rng = np.random.default_rng([spec.seed, 0x5CE4E])
     n_plants = int(placement.plant.max(initial=-1)) + 1
-    p = np.asarray(spec.weights) / sum(spec.weights)
+    w = np.asarray(spec.weights, np.float64)
+    w = w / w.max()          # first to at most 1: weights of 1e308 would sum to inf
+    p = w / w.sum()
     plant_species = rng.choice(len(spec.species), size=max(n_plants, 1), p=p).astype(np.int32)
     species_id = plant_species[placement.plant]
     factors = np.ones((n, len(VARIED)), np.float32)
