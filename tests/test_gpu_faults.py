@@ -5,7 +5,6 @@ explicit leaves."""
 
 from __future__ import annotations
 
-import gc
 import os
 import shutil
 import subprocess
@@ -13,7 +12,6 @@ import sys
 import textwrap
 import time
 
-import moderngl
 import numpy as np
 import pytest
 
@@ -24,18 +22,10 @@ from leafview.errors import GLContextLost, GpuLimitError, LeafviewError, ParamEr
 from leafview.gpu import limits
 from leafview.gpu.limits import MAX_GRID_VERTICES, MAX_RESOURCE_BYTES, ContextLimits, check_grid, check_scene
 from tests.conftest import require_or_skip
+from tests.support.gl_objects import live_gl_objects
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
-_GL_TYPES = (moderngl.Buffer, moderngl.Texture, moderngl.Framebuffer, moderngl.Renderbuffer,
-             moderngl.VertexArray, moderngl.Program, moderngl.ComputeShader)
-
-
-def _live() -> int:
-    gc.collect()
-    return sum(1 for o in gc.get_objects()
-               if isinstance(o, _GL_TYPES) and type(o.mglo).__name__ != "InvalidObject"
-               and not getattr(o, "_is_reference", False))
 
 
 def _rss() -> int:
@@ -48,25 +38,25 @@ def _rss() -> int:
 def test_image_just_above_the_context_limit_is_refused_before_allocating(gl, presets):
     lim = ContextLimits.of(gl.ctx)
     w, h = lim.max_image
-    before = _live()
+    before = live_gl_objects()
     with pytest.raises(GpuLimitError, match="GL_MAX_RENDERBUFFER_SIZE") as info:
         gl.render(presets["ovate"], (w + 1, 8))
     assert info.value.path == "size" and isinstance(info.value, ParamError)
     with pytest.raises(GpuLimitError, match="GL_MAX_VIEWPORT_DIMS"):
         gl.render(presets["ovate"], (8, h + 1))
-    assert _live() == before
+    assert live_gl_objects() == before
 
 
 @pytest.mark.gl
 def test_huge_multisampled_image_is_refused_with_the_attachment_size(gl, presets):
     """The hostile run's 16384² three-quarter view: 4 samples make a 4 GiB attachment, which
     llvmpipe cannot allocate (INCOMPLETE_ATTACHMENT before); now a message before any GL call."""
-    before = _live()
+    before = live_gl_objects()
     with pytest.raises(GpuLimitError, match=r"size: .*(samples|GL_MAX_RENDERBUFFER_SIZE)"):
         leafview.gpu.render(presets["ovate"], size=(16384, 16384), view="three-quarter")
     with pytest.raises(GpuLimitError, match="MAX_RESOURCE_BYTES"):
         leafview.gpu.render(presets["ovate"], size=(8192, 8192), view="three-quarter", linear=True)
-    assert _live() == before
+    assert live_gl_objects() == before
 
 
 @pytest.mark.gl
@@ -94,10 +84,10 @@ def test_buffer_just_above_the_resource_limit_is_refused_not_out_of_memory(gl):
     """A capture one vertex above MAX_RESOURCE_BYTES is refused before ``ctx.buffer`` (which would
     end in GL_OUT_OF_MEMORY or a driver abort); the gl fixture checks GL_NO_ERROR afterwards."""
     vertices = MAX_RESOURCE_BYTES // 24 + 1
-    before = _live()
+    before = live_gl_objects()
     with pytest.raises(GpuLimitError, match="MAX_RESOURCE_BYTES"):
         gl.resources.capture.recording(vertices)
-    assert _live() == before
+    assert live_gl_objects() == before
 
 
 @pytest.mark.gl
@@ -149,10 +139,10 @@ def test_scene_renderer_checks_memory_before_any_gl_object(gl, presets, monkeypa
 
     scene = build_scene(SceneSpec(species=(presets["ovate"],), leaves=200, seed=3))
     monkeypatch.setattr(limits, "physical_memory", lambda: 2**18)
-    before = _live()
+    before = live_gl_objects()
     with pytest.raises(GpuLimitError, match="memory budget"):
         SceneRenderer(gl.ctx, scene)
-    assert _live() == before
+    assert live_gl_objects() == before
 
 
 # -- API edges ----------------------------------------------------------------------------------
@@ -173,7 +163,7 @@ def test_every_gpu_owner_can_be_released_twice(gl, presets):
     from leafview.scene.spec import SceneSpec, build_scene
 
     ctx = gl.ctx
-    before = _live()
+    before = live_gl_objects()
     recs, table = pack_leaves([presets["ovate"], presets["maize"]])
     scene = build_scene(SceneSpec(species=(presets["ovate"],), leaves=50, seed=1))
     with GpuResources(ctx) as res:
@@ -193,7 +183,7 @@ def test_every_gpu_owner_can_be_released_twice(gl, presets):
             owner.release()
             owner.release()
             assert ctx.error == "GL_NO_ERROR", type(owner).__name__
-    assert _live() == before
+    assert live_gl_objects() == before
     # a renderer with a context of its own: test_context_released_between_scene_batches_is_a_clean_error
     # (a second context made current would take the session's place in this process)
 
@@ -214,10 +204,10 @@ def test_create_release_cycles_do_not_leak(gl, presets):
 
         for _ in range(30):
             cycle()
-        objects, rss = _live(), _rss()
+        objects, rss = live_gl_objects(), _rss()
         for _ in range(100):
             cycle()
-        grown, growth = _live() - objects, _rss() - rss
+        grown, growth = live_gl_objects() - objects, _rss() - rss
     print(f"\n100 shared-context cycles: RSS +{growth / 2**10:.0f} KiB, GL objects {grown:+d}")
     assert grown <= 0
     assert growth < 2 * 2**20, f"RSS grew by {growth / 2**20:.2f} MB"

@@ -3,9 +3,6 @@ renderer that is given them; created in one place, released in one place."""
 
 from __future__ import annotations
 
-import gc
-
-import moderngl
 import numpy as np
 import pytest
 
@@ -17,24 +14,15 @@ from leafview.gpu.renderer import LeafRenderer
 from leafview.gpu.resources import GpuResources
 from leafview.gpu.targets import RenderTarget, unpremultiply
 from leafview.scene.camera import frame_view
+from tests.support.gl_objects import live_gl_objects
 
 pytestmark = pytest.mark.gl
 
-_GL_TYPES = (moderngl.Buffer, moderngl.Texture, moderngl.Framebuffer, moderngl.Renderbuffer,
-             moderngl.VertexArray, moderngl.Program, moderngl.ComputeShader)
-
-
-def _live() -> int:
-    """GL objects alive and not released (framebuffer 0's wrappers are references, not objects)."""
-    gc.collect()
-    return sum(1 for o in gc.get_objects()
-               if isinstance(o, _GL_TYPES) and type(o.mglo).__name__ != "InvalidObject"
-               and not getattr(o, "_is_reference", False))
 
 
 def test_renderers_given_one_set_compile_each_program_once(gl, presets):
     leaves = [presets["ovate"], presets["maize"]]
-    before = _live()
+    before = live_gl_objects()
     with GpuResources(gl.ctx) as res:
         with LeafRenderer(gl.ctx, resources=res) as a:
             a.render(leaves[0], (24, 24))
@@ -54,23 +42,23 @@ def test_renderers_given_one_set_compile_each_program_once(gl, presets):
         # the renderers that borrowed the set released nothing of it: a new one still draws
         with LeafRenderer(gl.ctx, resources=res) as c:
             assert c.render(leaves[0], (24, 24))[..., 3].any()
-    assert _live() == before
+    assert live_gl_objects() == before
     assert gl.ctx.error == "GL_NO_ERROR"
 
 
 def test_release_in_one_place_leaves_no_gl_objects(gl, presets):
-    before = _live()
+    before = live_gl_objects()
     res = GpuResources(gl.ctx)
     r = LeafRenderer(gl.ctx, resources=res)
     r.render(presets["serrate"], (32, 32), "three-quarter")          # programs, grid, MSAA target
     r.capture(presets["serrate"], [0.0, 0.5], [0.5, 0.5])              # capture framebuffer
     r.render_many([presets["ovate"], presets["holly"]], (16, 16))     # batch rows, atlas target
-    assert _live() > before
+    assert live_gl_objects() > before
     r.release()
     res.release()
     res.release()   # idempotent
     r.release()
-    assert _live() == before
+    assert live_gl_objects() == before
     assert gl.ctx.error == "GL_NO_ERROR"
 
 
