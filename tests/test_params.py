@@ -167,3 +167,21 @@ def test_transform_matrix():
 
     m = Transform(translation=(1, 2, 3), rotation=(0, 0, 90), scale=2).matrix()
     np.testing.assert_allclose(m @ [1, 0, 0, 1], [1, 4, 3, 1], atol=1e-12)
+
+
+def test_a_row_where_the_axis_has_no_direction_is_refused():
+    """Found by the long fuzz run: a1 = a0 makes A'(v̄) = 3 v̄² ĵ, which is 0 in float64 at
+    v̄ = 5e-324; the normal of eq. 2 was then 0/0, the blade NaN and the bend solve raised a bare
+    ValueError. Validation now names the row."""
+    from leafview.core.compact import parse_compact
+    from leafview.deform.beam import bend_profile
+    from leafview.deform.surface import evaluate
+
+    omega = [0.0] * 6 + [5e-324, 0.0, 0.0, 0.25, 0.0, 0.0, 0.5, 0.0, 0.0] + [0.0] * 6
+    doc = {"leafview": 1, "omega": omega, "bending": {"load": 1.0, "petiole_length": 1.0}}
+    with pytest.raises(ParamError, match=r"omega\[6\].*no in-plane direction"):
+        parse_compact(doc)
+    # near the cusp but with a direction: accepted, and the blade and its bend are finite
+    ok = parse_compact({**doc, "omega": [0.0] * 6 + [0.01, 0.2, 0.0, 0.25, 0.3, 0.0, 0.5, 0.2, 0.0] + [0.0] * 6})
+    assert np.all(np.isfinite(evaluate(ok, np.linspace(-1, 1, 9), np.linspace(0, 1, 9))))
+    assert np.all(np.isfinite(bend_profile(ok).delta))

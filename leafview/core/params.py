@@ -33,6 +33,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from leafview.core.bezier import derivative_points, evaluate_curve
 from leafview.core.display import png_of
 from leafview.core.limits import MAX_SILHOUETTE_ROWS, check_name
 from leafview.errors import ParamError
@@ -70,6 +71,7 @@ STIFFNESS_RANGE = (1e-4, 1e4)   # flexural rigidity EI of midrib and petiole
 DIRECTION_LIMIT = 1e3       # |load direction component| (only the direction matters)
 MIN_DIRECTION = 1e-6        # the load direction's length must be at least this
 PHASE_LIMIT = 1e4           # |ripple phase θ|
+MIN_AXIS_TANGENT = 1e-6     # |A'(v̄_i)| in the leaf plane, per unit of v, at each silhouette row
 
 Vec3 = tuple[float, float, float]
 
@@ -529,6 +531,15 @@ def _check_shape(shape: Shape) -> None:
         if not v[i] > v[i - 1]:
             raise ParamError(f"shape.silhouette[{i}][0]",
                              f"v̄ must be strictly increasing: {v[i - 1]!r} then {v[i]!r}")
+    # eq. 2 needs the axis' in-plane direction at each row's foot: where A'(v̄) (nearly) vanishes,
+    # the normal n(v̄) is 0/0 and the whole blade NaN (a1 = a0 and v̄ = 5e-324: A' = 3 v̄² ĵ = 0)
+    tangents = evaluate_curve(derivative_points(shape.axis_points()), np.asarray(v))[:, :2]
+    for i, t in enumerate(tangents):
+        if not math.hypot(float(t[0]), float(t[1])) >= MIN_AXIS_TANGENT:
+            raise ParamError(f"shape.silhouette[{i}][0]",
+                             f"the axis has no in-plane direction at v̄ = {v[i]!r} (|A'(v̄)| below "
+                             f"{MIN_AXIS_TANGENT:g}), so the silhouette's normal there is undefined (eq. 2): "
+                             "move the row or the axis control points a1, a2")
 
 
 def parse_params(data: Any) -> LeafParams:
