@@ -60,6 +60,7 @@ LAYERS: list[tuple[str, str]] = [
     ("leafview.export", "glTF, OBJ/PLY and USD writers; images"),
     ("leafview.gpu", "moderngl: layout, shader loading, passes, renderers"),
     ("leafview.scene", "scene specs, plants, stems, cameras (no GL)"),
+    ("leafview.fit", "point clouds and RGB-D views to leaves (no GL)"),
     ("leafview.botany", "landmarks, catalogue, Ω fits, lobes, morph"),
     ("leafview.deform", "fBm, cantilever beam, the whole surface (numpy)"),
     ("leafview.core", "LeafParams, Bézier maths, blade, files (numpy)"),
@@ -77,7 +78,7 @@ LEFT_TARGETS = ("leafview.core", "leafview.inputs", BASE)        # arcs into the
 COLOURS = {
     API: "#6a3d9a", "leafview.cli": "#1f78b4", "leafview.bench": "#b15928", "leafview.dataset": "#7b4f9d",
     "leafview.notebook": "#5d7c1f", "leafview.app": "#e31a1c",
-    "leafview.export": "#e08000", "leafview.gpu": "#2d8f2d", "leafview.scene": "#8c6d1f",
+    "leafview.export": "#e08000", "leafview.gpu": "#2d8f2d", "leafview.scene": "#8c6d1f", "leafview.fit": "#a0522d",
     "leafview.botany": "#138a6a", "leafview.deform": "#6a5acd", "leafview.core": "#c2185b",
     "leafview.inputs": "#00838f", BASE: "#666666",
 }

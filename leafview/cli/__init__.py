@@ -44,13 +44,28 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "scene": ("leafview.cli.scene", "render, save, export or view a scene of many leaves"),
     "shapes": ("leafview.cli.shapes", "list or render the botanical shape catalogue, or a multilobed leaf"),
     "dataset": ("leafview.cli.dataset", "render a synthetic dataset with exact labels (COCO, depth, normals, uv)"),
+    "fit": ("leafview.cli.fit", "fit one leaf's shape and placement to a point cloud (PLY, XYZ/CSV, .npy)"),
+    "capture": ("leafview.cli.capture", "segment and fit the leaves of dense foliage from RGB-D views"),
+    "eval-capture": ("leafview.cli.eval_capture", "score a capture against the truth its views were rendered from"),
 }
+
+
+class _CommandListFormatter(argparse.HelpFormatter):
+    """argparse's formatter, with the command list's help column far enough right for the
+    longest command name (argparse measures sub-commands without their indentation, so
+    ``eval-capture`` would otherwise push its help onto the next line)."""
+
+    def add_argument(self, action: argparse.Action) -> None:
+        super().add_argument(action)
+        if isinstance(action, argparse._SubParsersAction) and action.help is not argparse.SUPPRESS:
+            self._action_max_length += self._indent_increment
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """The ``leafview`` parser: every command with its one-line help, and the options of
     ``command`` (whose module is imported here; the others are not)."""
-    parser = argparse.ArgumentParser(prog="leafview", description="Parametric plant leaves evaluated on the GPU.")
+    parser = argparse.ArgumentParser(prog="leafview", description="Parametric plant leaves evaluated on the GPU.",
+                                     formatter_class=_CommandListFormatter)
     parser.add_argument("--version", action="version", version=f"leafview {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True

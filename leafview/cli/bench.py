@@ -1,4 +1,4 @@
-"""``leafview bench [core|scene|export|shapes|dataset|all] [--json] [--quick]``: the benchmark tables of
+"""``leafview bench [core|scene|export|shapes|dataset|capture|all] [--json] [--quick]``: the benchmark tables of
 :mod:`leafview.bench`, measured in this process (also run by ``python bench/run_bench.py``).
 
 Each table module has ``run(quick, ctx) -> dict`` (JSON-able, with ``gl_renderer``) and
@@ -26,6 +26,7 @@ SUITES: dict[str, str] = {
     "scene": "leafview.bench.scene",     # large scenes: frame times, culling and level of detail
     "shapes": "leafview.bench.shapes",   # botanical leaves generated, fitted and drawn per second
     "dataset": "leafview.bench.dataset", # dataset images per second, 1 worker against 2 (local engine)
+    "capture": "leafview.bench.capture", # fitting point clouds and capturing a plant from RGB-D views
 }
 
 

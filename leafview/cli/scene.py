@@ -6,6 +6,11 @@ Examples::
     leafview scene --layout plant --leaves 3000 --save tree.toml
     leafview scene tree.toml -o tree.png --camera ground --size 1280x720
     leafview scene tree.toml --view            # interactive window
+    leafview scene --leaves 40 --layout plant --views 8 --depth-noise 0.005 --holes -o views/
+
+``--views N -o DIR`` writes synthetic RGB-D views with exact ground truth instead of one picture
+(:mod:`leafview.export.views`; the options are shared with ``leafview render``); it goes with
+none of the other outputs. The noise is seeded with the scene's ``--seed``.
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from typing import Any
 from leafview.app.scene_view import view_scene
 from leafview.atomic import outputs
 from leafview.cli.args import EXIT_OK, builtin_names, count, image_size, output_path, progress_bar, refuse_directory
+from leafview.cli.render import add_views_arguments, check_views_arguments, write_views
 from leafview.core.compact import is_compact
 from leafview.core.io import leaves_from_document, read_document, save_leaves
 from leafview.core.limits import MAX_PLANTS, MAX_VIEW_FRAMES
@@ -43,6 +49,8 @@ from leafview.scene.spec import (
 )
 
 __all__ = ["add_arguments", "run", "spec_from_args"]
+
+DEFAULT_CAMERA = "three-quarter"
 
 
 def _count(text: str) -> int:
@@ -86,10 +94,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    "leaf count)")
     p.add_argument("--variation", type=_fraction, help="± fraction each leaf's shape varies (default 0.2)")
     p.add_argument("--no-stems", action="store_true", help="leaves only, no branches")
-    p.add_argument("-o", "--output", type=output_path, metavar="IMAGE",
-                   help="render to this image (.png, .tif, .exr)")
+    p.add_argument("-o", "--output", type=output_path, metavar="IMAGE|DIR",
+                   help="render to this image (.png, .tif, .exr); with --views, the folder of the views")
     p.add_argument("--size", type=image_size, default=(1024, 768), metavar="WxH", help="image size (default 1024x768)")
-    p.add_argument("--camera", choices=SCENE_VIEWS, default="three-quarter", help="camera (default three-quarter)")
+    p.add_argument("--camera", choices=SCENE_VIEWS, default=None, help=f"camera (default {DEFAULT_CAMERA})")
     p.add_argument("--no-cull", action="store_true", help="draw every leaf (no frustum or size culling)")
     p.add_argument("--no-lod", action="store_true", help="every leaf at the finest grid")
     p.add_argument("--save", type=output_path, metavar="FILE",
@@ -100,6 +108,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--frames", type=_frames, metavar="N", help="with --view: draw N frames, then close (scripted runs)")
     p.add_argument("--screenshot", type=output_path, metavar="IMAGE",
                    help="with --view: write the window after the last frame")
+    add_views_arguments(p)
     p.add_argument("--allow-outside-presets", action="store_true",
                    help="let the scene file's [[species]] preset paths leave its folder (absolute paths, '..')")
     p.add_argument("-q", "--quiet", action="store_true", help="print nothing on success")
@@ -131,8 +140,15 @@ def spec_from_args(args: argparse.Namespace) -> SceneSpec:
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
+    check_views_arguments(args, {"--view": args.view, "--frames": args.frames is not None,
+                                 "--screenshot": bool(args.screenshot), "--export": bool(args.export),
+                                 "--save": bool(args.save), "--camera": args.camera is not None,
+                                 "--no-cull": args.no_cull, "--no-lod": args.no_lod})
+    if args.views is not None:
+        return
+    args.camera = args.camera or DEFAULT_CAMERA
     if not (args.output or args.save or args.export or args.view):
-        raise UsageError("nothing to do: give -o IMAGE, --save FILE, --export FILE or --view")
+        raise UsageError("nothing to do: give -o IMAGE, --save FILE, --export FILE, --view or --views N -o DIR")
     if (args.frames is not None or args.screenshot) and not args.view:
         raise UsageError("--frames and --screenshot go with --view")
     if args.frames is not None and args.frames < 1:
@@ -192,6 +208,9 @@ def run(args: argparse.Namespace) -> int:
         spec = spec_from_args(args)   # every input is validated before anything is written
         scene = build_scene(spec)
     t_build = time.perf_counter() - t0
+    if args.views is not None:
+        write_views(args, scene, size=args.size, seed=spec.seed)
+        return EXIT_OK
     wrote: list[str] = []
     with outputs():   # --save, --export and -o are written together, or none of them
         _write_outputs(args, scene, spec, leaves is not None, t_build, wrote)

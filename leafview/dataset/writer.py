@@ -47,22 +47,22 @@ from typing import Any
 
 import moderngl
 import numpy as np
-import OpenImageIO as oiio
 from numpy.typing import NDArray
 
-from leafview._version import __version__
-from leafview.atomic import atomic_output, failed_write, outputs, write_text
+from leafview.atomic import outputs, write_text
 from leafview.core.params import LeafParams
 from leafview.dataset.labels import image_annotations
 from leafview.dataset.layouts import ImageSetup, setup_image
 from leafview.dataset.recipe import Recipe
 from leafview.errors import ImageWriteError
+from leafview.export.views import camera_document
+from leafview.export.views import write_pixels as _write_pixels
 from leafview.gpu.aov import render_aovs
 from leafview.gpu.context import create_headless_context
 from leafview.gpu.frame import Lighting
 from leafview.gpu.resources import GpuResources
 from leafview.gpu.scene import SceneRenderer
-from leafview.scene.camera import Camera, intrinsics
+from leafview.scene.camera import Camera
 from leafview.scene.spec import scene_from_leaves
 
 __all__ = ["ImageRenderer", "FOLDERS", "image_files", "shard_manifest_path", "write_shard_manifest", "file_digest",
@@ -92,59 +92,6 @@ def file_digest(path: Path) -> dict[str, Any]:
     """``{"bytes": size, "sha256": hex}`` of a file."""
     data = path.read_bytes()
     return {"bytes": len(data), "sha256": hashlib.sha256(data).hexdigest()}
-
-
-# -- pixels to files -----------------------------------------------------------------------------
-def _write_pixels(path: Path, data: NDArray[Any], fmt: str, channels: Sequence[str]) -> None:
-    """Write (h, w, c) ``data`` (``fmt``: OpenImageIO's "uint8", "uint16" or "float") to ``path``
-    atomically; the file is read back and must give the same pixels."""
-    h, w, c = data.shape
-    spec = oiio.ImageSpec(w, h, c, fmt)
-    spec.channelnames = tuple(channels)
-    spec.attribute("Software", f"leafview {__version__}")
-    spec.attribute("DateTime", "")    # OpenImageIO stamps EXR files with the time unless given an empty one
-    if path.suffix == ".exr":
-        spec.attribute("compression", "zip")
-        spec.attribute("oiio:ColorSpace", "Raw")
-    elif fmt == "uint8":
-        spec.attribute("oiio:ColorSpace", "sRGB")
-    else:
-        spec.attribute("oiio:ColorSpace", "Raw")
-    pixels = np.ascontiguousarray(data)
-
-    def verify(tmp: Path) -> None:
-        inp = oiio.ImageInput.open(str(tmp))
-        if inp is None:
-            raise _failure(path, "the written image cannot be read back", oiio.geterror())
-        try:
-            back = inp.read_image(fmt)
-        finally:
-            inp.close()
-        if back is None or back.shape != pixels.shape or not np.array_equal(back, pixels):
-            raise _failure(path, "the written image reads back differently", "")
-
-    with atomic_output(path, verify=verify) as tmp:
-        out = oiio.ImageOutput.create(str(tmp))
-        if out is None:
-            raise ImageWriteError(f"{path}: cannot create a writer: {oiio.geterror()}")
-        ok = out.open(str(tmp), spec) and out.write_image(pixels)
-        detail = "" if ok else out.geterror()
-        if not out.close() and ok:
-            ok, detail = False, out.geterror()
-        if not ok:
-            raise _failure(path, "writing failed", detail)
-
-
-def _failure(path: Path, what: str, detail: str) -> Exception:
-    return failed_write(path, f"{what}: {detail}") or ImageWriteError(f"{path}: {what}: {detail}".rstrip(": "))
-
-
-def camera_document(camera: Camera, size: tuple[int, int]) -> str:
-    """``cameras/NNNNNN.json``: K and world_from_camera (OpenCV convention), width and height."""
-    k, world_from_camera = intrinsics(camera, size)
-    doc = {"width": size[0], "height": size[1], "K": k.tolist(), "world_from_camera": world_from_camera.tolist(),
-           "convention": "opencv"}
-    return "{\n" + ",\n".join(f" {json.dumps(k)}: {json.dumps(v)}" for k, v in doc.items()) + "\n}\n"
 
 
 # -- rendering -------------------------------------------------------------------------------------

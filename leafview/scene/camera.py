@@ -28,6 +28,7 @@ blank or speckled image: :func:`frame_view` refuses them (:func:`check_framable`
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -40,7 +41,8 @@ from leafview.core.params import LeafParams, ParamError
 from leafview.deform.surface import evaluate, grid_uv
 
 __all__ = ["VIEWS", "Camera", "frame_view", "check_framable", "check_leaf_framable", "MAX_FRAME_REACH",
-           "intrinsics", "CV_FROM_GL"]
+           "intrinsics", "camera_from_intrinsics", "CV_FROM_GL", "RING_FOV_DEG", "RING_ELEVATIONS", "ring_angles",
+           "orbit_cameras"]
 
 MAX_FRAME_REACH = 1e18     # farthest framed point from the origin (its square must fit float32)
 
@@ -126,6 +128,42 @@ def intrinsics(camera: Camera, size: tuple[int, int]) -> tuple[NDArray[np.float6
                   [0.0, 0.0, 1.0]])
     world_from_camera = np.linalg.inv(np.asarray(camera.view, np.float64)) @ CV_FROM_GL
     return k, world_from_camera
+
+
+def camera_from_intrinsics(k: ArrayLike, world_from_camera: ArrayLike, size: tuple[int, int], near: float,
+                           far: float) -> Camera:
+    """The perspective :class:`Camera` whose :func:`intrinsics` at ``size`` are ``(k,
+    world_from_camera)`` (OpenCV convention), with clip planes ``near`` < ``far`` along the optical
+    axis: how a view read from disk (a capture, a dataset image) is drawn again.
+
+    Raises ValueError for a ``k`` with skew, non-positive focal lengths, a ``world_from_camera``
+    that is not a rigid motion, or clip planes not ``0 < near < far``.
+    """
+    k = np.asarray(k, np.float64)
+    m = np.asarray(world_from_camera, np.float64)
+    w, h = float(size[0]), float(size[1])
+    if k.shape != (3, 3) or m.shape != (4, 4) or not (np.all(np.isfinite(k)) and np.all(np.isfinite(m))):
+        raise ValueError("camera_from_intrinsics: K must be a finite 3×3 and world_from_camera a finite 4×4 matrix")
+    if k[0, 1] != 0.0 or k[1, 0] != 0.0 or k[2, 0] != 0.0 or k[2, 1] != 0.0 or k[2, 2] != 1.0:
+        raise ValueError("camera_from_intrinsics: K must be [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]")
+    if not (k[0, 0] > 0.0 and k[1, 1] > 0.0 and w > 0 and h > 0):
+        raise ValueError("camera_from_intrinsics: focal lengths and the image size must be positive")
+    r = m[:3, :3]
+    if (np.abs(r.T @ r - np.eye(3)).max() > 1e-6 or np.linalg.det(r) < 0.0
+            or not np.allclose(m[3], (0.0, 0.0, 0.0, 1.0))):
+        raise ValueError("camera_from_intrinsics: world_from_camera is not a rotation and a translation")
+    if not (0.0 < near < far and np.isfinite(far)):
+        raise ValueError(f"camera_from_intrinsics: clip planes must satisfy 0 < near < far, got {near}, {far}")
+    proj = np.zeros((4, 4))
+    proj[0, 0] = 2.0 * k[0, 0] / w
+    proj[1, 1] = 2.0 * k[1, 1] / h
+    proj[0, 2] = 1.0 - 2.0 * (k[0, 2] + 0.5) / w
+    proj[1, 2] = 2.0 * (k[1, 2] + 0.5) / h - 1.0
+    proj[2, 2] = -(far + near) / (far - near)
+    proj[2, 3] = -2.0 * far * near / (far - near)
+    proj[3, 2] = -1.0
+    view = CV_FROM_GL @ np.linalg.inv(m)
+    return Camera(view, proj, np.array([*m[:3, 3], 1.0]), True)
 
 
 def frame_view(view: str, points: NDArray[np.float64], size: tuple[int, int]) -> Camera:
@@ -236,3 +274,68 @@ def scene_camera(scene: Bounded, size: tuple[int, int], view: str = "three-quart
     target = np.array([center[0], center[1], lo[2] + 0.35 * extent[2]])
     far = float(np.linalg.norm(extent)) * 2 + 10.0
     return look_at(eye, target, size[0] / size[1], 0.05, far, fov_deg=GROUND_FOV_DEG)
+
+
+RING_FOV_DEG = 40.0
+RING_ELEVATIONS = (25.0, 50.0)
+MAX_RING_ELEVATION = 85.0   # look_at keeps +z up: the pole itself has no "up"
+
+
+def ring_angles(count: int, elevations: Sequence[float] = RING_ELEVATIONS,
+                azimuth_deg: float = 0.0) -> list[tuple[float, float]]:
+    """(azimuth, elevation) in degrees of ``count`` views on a ring: azimuths evenly spaced from
+    ``azimuth_deg`` (0: from the -y side, like the ``front`` view; increasing towards +x), view
+    ``k`` at ``elevations[k % len(elevations)]`` (alternating rows for two elevations).
+
+    Raises ValueError for a count below 1, no elevation, or one that is not finite or beyond
+    ±:data:`MAX_RING_ELEVATION`."""
+    if int(count) < 1:
+        raise ValueError(f"a ring needs at least 1 view, got {count}")
+    els = [float(e) for e in elevations]
+    if not els:
+        raise ValueError("a ring needs at least one elevation")
+    for e in els:
+        if not (np.isfinite(e) and abs(e) <= MAX_RING_ELEVATION):
+            raise ValueError(f"elevation {e:g}° outside ±{MAX_RING_ELEVATION:g}°")
+    return [((float(azimuth_deg) + 360.0 * k / int(count)) % 360.0, els[k % len(els)]) for k in range(int(count))]
+
+
+def orbit_cameras(sphere: Bounded | tuple[ArrayLike, float], count: int, size: tuple[int, int],
+                  elevations: Sequence[float] = RING_ELEVATIONS, *, fov_deg: float = RING_FOV_DEG,
+                  azimuth_deg: float = 0.0) -> list[Camera]:
+    """``count`` perspective cameras on a ring around a bounding sphere, each aimed at its centre
+    (the angles of :func:`ring_angles`, +z up, ``fov_deg`` vertical field of view).
+
+    ``sphere`` is ``(centre, radius)`` in world space, or anything :class:`Bounded` (its box's
+    circumscribed sphere). Every camera stands at the distance where the sphere just fits the
+    narrower of the two fields of view (``radius / sin(half angle)``), so whatever lies in the
+    sphere is in every image; the clip planes hug the sphere (``near`` 2 % in front of it, ``far``
+    2 % behind), which keeps the depth buffer's precision for the scene. Deterministic: the same
+    arguments give the same matrices.
+
+    Raises ValueError for a radius that is not positive and finite, a bad size or field of view,
+    and :class:`~leafview.core.params.ParamError` for a sphere that float32 cannot frame
+    (:func:`check_framable`)."""
+    if isinstance(sphere, tuple):
+        centre, radius = np.asarray(sphere[0], np.float64).reshape(3), float(sphere[1])
+    else:
+        lo, hi = (np.asarray(b, np.float64) for b in sphere.bounds())
+        centre, radius = (lo + hi) / 2.0, float(np.linalg.norm(hi - lo)) / 2.0
+    if not (np.isfinite(radius) and radius > 0.0 and np.isfinite(centre).all()):
+        raise ValueError(f"the bounding sphere needs a finite centre and a positive radius, got {radius!r}")
+    w, h = int(size[0]), int(size[1])
+    if w <= 0 or h <= 0:
+        raise ValueError(f"size must be positive, got {size!r}")
+    if not 1.0 <= float(fov_deg) <= 170.0:
+        raise ValueError(f"field of view must be in [1°, 170°], got {fov_deg}")
+    check_framable(centre + radius * np.vstack([np.eye(3), -np.eye(3)]), "the scene", "transform")
+    half_v = np.radians(float(fov_deg)) / 2.0
+    half = min(half_v, float(np.arctan(np.tan(half_v) * w / h)))
+    dist = radius / np.sin(half)
+    near, far = (dist - radius) * 0.98, (dist + radius) * 1.02
+    cameras = []
+    for az_deg, el_deg in ring_angles(count, elevations, azimuth_deg):
+        az, el = np.radians(az_deg), np.radians(el_deg)
+        back = np.array([np.sin(az) * np.cos(el), -np.cos(az) * np.cos(el), np.sin(el)])  # towards the camera
+        cameras.append(look_at(centre + dist * back, centre, w / h, near, far, fov_deg=float(fov_deg)))
+    return cameras

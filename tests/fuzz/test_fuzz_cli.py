@@ -374,6 +374,9 @@ OPTIONS = {
     "dataset": ["-o", "--count", "--leaves", "--layout", "--species", "--size", "--seed", "--elevation", "--azimuth",
                 "--distance", "--sun-elevation", "--light-intensity", "--split", "--shard-size", "--engine",
                 "--workers", "--address", "--gpus-per-worker", "-q"],
+    "fit": ["-o", "--scanlines", "--iterations", "--keep-unexplained", "-q"],
+    "capture": ["-o", "--delta-plane", "--report", "--seed", "-q"],
+    "eval-capture": ["--capture", "--truth", "--json", "--seed", "-q"],
 }
 # one argument that makes sure the command refuses before opening a window or measuring
 VIEW_REFUSALS = [["--size", "10x10"], ["--frames", "0"], ["in/missing.toml"], ["--screenshot", "w.jpg"],
