@@ -361,7 +361,7 @@ def test_capture_of_a_cluttered_scene(cluttered: SynthScene, captured: CaptureRe
     assert set(res.timings) == {"segment", "refine", "fit", "total"}
     assert len(res.candidates) > len(res.leaves)
     known = {DUPLICATE, NOT_PLANE, TOO_FEW, FIT_FAILED, UNEXPLAINED, capture_module.FRAGMENT,
-             capture_module.CONJOINED, capture_module.NOT_GREEN}
+             capture_module.CONJOINED}
     assert {reason for reason, _ in res.rejected} <= known
     assert sum(reason == DUPLICATE for reason, _ in res.rejected) >= len(res.leaves)   # 3 views: most leaves twice
     json.dumps(res.to_dict())
@@ -375,11 +375,15 @@ def test_parallel_fits_give_the_same_leaves(cluttered: SynthScene, captured: Cap
     assert again.rejected == captured.rejected
 
 
-def test_leaves_that_are_not_green_are_reported(cluttered: SynthScene, captured: CaptureResult) -> None:
+def test_only_leaf_coloured_pixels_are_captured(cluttered: SynthScene, captured: CaptureResult) -> None:
+    view = cluttered.views[0]
+    kept = capture_module.leaf_coloured(view)
+    c = view.color.astype(int)
+    green = (c[..., 1] > c[..., 0]) & (c[..., 1] > c[..., 2])
+    assert np.array_equal(kept.depth > 0, (view.depth > 0) & green) and kept.depth.dtype == np.float32
     red = [dataclasses.replace(v, color=np.ascontiguousarray(v.color[..., [1, 0, 2]])) for v in cluttered.views]
-    res = capture(red)   # green and red channels swapped: every leaf reddish
-    assert len(res.leaves) < len(captured.leaves) // 2     # the synthetic greens include a few near-greys
-    assert sum(reason == capture_module.NOT_GREEN for reason, _ in res.rejected) >= len(captured.leaves) // 2
+    with pytest.raises(ParamError, match="leaf-coloured"):
+        capture(red)   # green and red swapped: no pixel is green
     assert len(capture(red, leaf_colour=None).leaves) == len(captured.leaves)
 
 

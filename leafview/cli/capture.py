@@ -47,6 +47,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--report", type=output_path, metavar="FILE",
                    help="also write a JSON report: candidates, rejected leaves and why, timings")
     p.add_argument("--seed", type=int, default=0, help="seed of RANSAC and subsampling (default 0)")
+    p.add_argument("--any-colour", action="store_true",
+                   help="use every pixel, not only those whose green is the largest channel (autumn leaves)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar and no summary")
 
 
@@ -81,7 +83,8 @@ def run(args: argparse.Namespace) -> int:
         bar.refresh()
 
     try:
-        result = capture(views, delta_plane=args.delta_plane, progress=progress, seed=args.seed)
+        result = capture(views, delta_plane=args.delta_plane, progress=progress, seed=args.seed,
+                         leaf_colour=None if args.any_colour else "green")
     finally:
         bar.close()
     seconds = time.perf_counter() - t0

@@ -37,6 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth", metavar="FILE", help="the truth leaf set (default DIR/truth.leaves.json)")
     p.add_argument("--json", type=output_path, metavar="FILE", help="also write the figures as JSON")
     p.add_argument("--seed", type=int, default=0, help="seed of the capture made here (default 0)")
+    p.add_argument("--any-colour", action="store_true", help="the capture made here uses every pixel's colour")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar and no table")
 
 
@@ -44,12 +45,12 @@ def run(args: argparse.Namespace) -> int:
 
     json_path = refuse_directory("--json", args.json) if args.json else None
     directory = Path(args.directory)
+    views = read_views(directory)   # checks the folder first
     truth_path = Path(args.truth) if args.truth else directory / "truth.leaves.json"
-    if not truth_path.is_file():
+    if not args.truth and not (directory / "truth.leaves.json").is_file():
         raise UsageError(f"{truth_path}: no truth leaf set (views written by `leafview scene … --views N` have one; "
                          "or pass --truth FILE)")
     truth = load_leaves(truth_path)
-    views = read_views(directory)
     missing = [v.name for v in views if v.instance is None]
     if missing:
         raise UsageError(f"{directory / (missing[0] + '.instance.png')}: missing; the evaluation needs the truth "
@@ -60,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
         captured = load_leaves(args.capture)
         source = str(args.capture)
     else:
-        result = capture(views, seed=args.seed)
+        result = capture(views, seed=args.seed, leaf_colour=None if args.any_colour else "green")
         seconds = time.perf_counter() - t0
         captured = list(result.leaves)
         source = f"captured now: {capture_summary(result, len(views), seconds)}"

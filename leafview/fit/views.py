@@ -254,11 +254,15 @@ def view_names(directory: str | os.PathLike[str]) -> list[str]:
     colour or depth image beside it, or an image without its json (an error when read). Other
     json files (``truth.leaves.json``, ``views.json``) are not views."""
     folder = Path(directory)
-    if not folder.exists():
-        raise _fail(folder, "no such folder of views")
-    if not folder.is_dir():
-        raise _fail(folder, "is not a folder (expected a folder of views: NAME.json, NAME.color.png, NAME.depth.npy)")
-    files = {p.name for p in folder.iterdir()}
+    try:
+        if not folder.exists():
+            raise _fail(folder, "no such folder of views")
+        if not folder.is_dir():
+            raise _fail(folder, "is not a folder (expected a folder of views: NAME.json, NAME.color.png, "
+                                "NAME.depth.npy)")
+        files = {p.name for p in folder.iterdir()}
+    except OSError as exc:   # a name too long, no permission, a loop of links
+        raise _fail(folder, f"cannot be read: {exc.strerror or exc}") from None
     names = set()
     for f in files:
         for s in (".color.png", *_DEPTHS):
