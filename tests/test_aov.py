@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy.ndimage import binary_erosion
+from support.transforms import axis_rotation
 
 from leafview.core.blade import normal_from
 from leafview.core.params import Bending, LeafParams, Transform
@@ -28,14 +29,6 @@ DEPTH_RTOL = 1e-3
 NORMAL_TOL_DEG = 2.0
 GRAZING_COS = 0.1     # normals are compared where the surface is not seen edge-on
 RESOLVED_DEG = 4.0    # ... and, against the surface itself, where the grid resolves it
-
-
-def _rotation(axis: int, angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    i, j = [k for k in range(3) if k != axis]
-    m = np.eye(4)
-    m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
-    return m
 
 
 def _stem(a: np.ndarray, b: np.ndarray, radius: float, sides: int = 8):
@@ -68,7 +61,7 @@ def scene() -> Scene:
         place = np.eye(4)
         place[:3, 3] = (0.55 * (i % 4), 0.6 * (i // 4), rng.uniform(0.0, 0.3))
         scale = np.diag([0.8, 0.8, 0.8, 1.0])
-        matrices.append(place @ _rotation(2, rng.uniform(0, 2 * np.pi)) @ _rotation(0, rng.uniform(-0.6, 0.6))
+        matrices.append(place @ axis_rotation(2, rng.uniform(0, 2 * np.pi)) @ axis_rotation(0, rng.uniform(-0.6, 0.6))
                         @ scale)
     factors = (1.0 + variation * rng.uniform(-1.0, 1.0, (n, 21))).astype(np.float32)
     tint = (1.0 + 0.1 * rng.uniform(-1.0, 1.0, n)).astype(np.float32)

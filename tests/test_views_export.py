@@ -14,6 +14,7 @@ import OpenImageIO as oiio
 import pytest
 from scipy.ndimage import binary_erosion
 from scipy.spatial import cKDTree
+from support.transforms import axis_rotation
 
 from leafview._version import __version__
 from leafview.cli import main
@@ -47,14 +48,6 @@ VIEWS = 3
 NEAR_FRACTION = 0.01     # of a leaf's length: a back-projected pixel this close to its truth leaf is "on" it
 
 
-def _rotation(axis: int, angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    i, j = [k for k in range(3) if k != axis]
-    m = np.eye(4)
-    m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
-    return m
-
-
 def make_scene(n: int = 12, seed: int = 11) -> Scene:
     """Twelve varied, overlapping leaves of four species (flat, curled, rippled), no stems and no
     bending (so the truth leaf set draws exactly as the scene does)."""
@@ -67,7 +60,7 @@ def make_scene(n: int = 12, seed: int = 11) -> Scene:
     for i in range(n):
         place = np.eye(4)
         place[:3, 3] = (0.55 * (i % 4), 0.6 * (i // 4), rng.uniform(0.0, 0.3))
-        matrices.append(place @ _rotation(2, rng.uniform(0, 2 * np.pi)) @ _rotation(0, rng.uniform(-0.6, 0.6))
+        matrices.append(place @ axis_rotation(2, rng.uniform(0, 2 * np.pi)) @ axis_rotation(0, rng.uniform(-0.6, 0.6))
                         @ np.diag([0.8, 0.8, 0.8, 1.0]))
     factors = (1.0 + variation * rng.uniform(-1.0, 1.0, (n, 21))).astype(np.float32)
     tint = (1.0 + 0.1 * rng.uniform(-1.0, 1.0, n)).astype(np.float32)
@@ -280,7 +273,7 @@ def test_ring_cameras_frame_the_sphere_evenly_and_deterministically():
 def _camera(w: int = 200, h: int = 150) -> tuple[np.ndarray, np.ndarray]:
     k = np.array([[150.0, 0.0, (w - 1) / 2], [0.0, 150.0, (h - 1) / 2], [0.0, 0.0, 1.0]])
     m = np.eye(4)
-    m[:3, :3] = _rotation(2, 0.7)[:3, :3] @ _rotation(0, 2.0)[:3, :3]
+    m[:3, :3] = axis_rotation(2, 0.7)[:3, :3] @ axis_rotation(0, 2.0)[:3, :3]
     m[:3, 3] = (1.0, 2.0, 3.0)
     return k, m
 
