@@ -20,7 +20,7 @@ from skimage.segmentation import find_boundaries
 from leafview.core.params import LeafParams
 from leafview.export.images import contact_sheet, write_image
 from leafview.export.views import render_instance_ids, render_views
-from leafview.fit.capture import capture, default_delta
+from leafview.fit.capture import capture, default_delta, leaf_coloured
 from leafview.fit.cloud import fit_cloud
 from leafview.fit.segment import segment_view
 from leafview.fit.synthetic import curled, occluded_cloud
@@ -66,7 +66,8 @@ def pipeline(tmp: Path) -> None:
         views = read_views(tmp / "views")
         result = capture(views, seed=0)
         view = views[0]
-        seg = segment_view(view, 0, delta_plane=default_delta(views))
+        masked = [leaf_coloured(v) for v in views]   # what capture() segments (leaf_colour="green")
+        seg = segment_view(masked[0], 0, delta_plane=default_delta(masked))
         fitted = render_instance_ids(ctx, list(result.leaves), view.k, view.world_from_camera, SIZE)
     finally:
         ctx.release()
