@@ -477,3 +477,26 @@ def test_check_cloud_names_its_input() -> None:
                     "leaf 3")
     flat = np.c_[np.random.default_rng(1).normal(size=(40, 2)), np.zeros(40)]
     np.testing.assert_array_equal(check_cloud(flat), flat)          # a flat leaf is fine
+
+
+def test_a_solve_that_ends_in_an_undrawable_shape_falls_back_to_its_start(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The stacked-leaves cloud once drove the axis to no in-plane direction at a row, which
+    LeafParams refuses: the fit then keeps its drawable start (the enclosing ellipse) and reports
+    that it does not explain the cloud, rather than raising."""
+    import leafview.fit.cloud as cloud
+
+    real = cloud._finish
+    calls = []
+
+    def first_refused(x, placement, world_from_frame, name):
+        calls.append(x.copy())
+        if len(calls) == 1:
+            raise ParamError("shape.silhouette[0][0]", "the axis has no in-plane direction")
+        return real(x, placement, world_from_frame, name)
+
+    monkeypatch.setattr(cloud, "_finish", first_refused)
+    truth = _curled("ovate", 3)
+    points, _ = sample_leaf(truth, 1500, 3)
+    fit = fit_cloud(points)
+    assert len(calls) == 2 and not np.allclose(calls[0], calls[1])
+    assert np.isfinite(fit.median) and fit.params.transform.scale > 0

@@ -390,6 +390,7 @@ def fit_cloud(points: ArrayLike, *, scanlines: int = 24, max_iterations: int = 1
     ellipse = mvee(frame[:, :2])
     placement = _initial_placement(frame, ellipse)
     x = _initial_omega(ellipse, placement)
+    x0, placement0 = x.copy(), placement.copy()
     rng = np.random.default_rng(seed)
     pick = np.sort(rng.choice(len(p), MAX_FIT_POINTS, replace=False)) if len(p) > MAX_FIT_POINTS else np.arange(len(p))
     sub = frame[pick]
@@ -415,14 +416,13 @@ def fit_cloud(points: ArrayLike, *, scanlines: int = 24, max_iterations: int = 1
         moved = float(np.sqrt(np.mean((after - before) ** 2)))
         if moved < tol:
             break
-    omega = qm.to_omega(x)
-    if omega[9:12].sum() < 0.0:             # the same surface with the sides' names swapped
-        omega[9:12] = -omega[9:12]
-    if _base_is_narrow(qm.from_omega(omega)):
-        omega, placement = qm.reversed_omega(omega), placement @ qm.REVERSE
-    x = qm.from_omega(np.clip(omega, -OMEGA_LIMIT, OMEGA_LIMIT))
-    world = world_from_frame @ placement
-    params = LeafParams.from_vector(qm.to_omega(x)).replace(transform=Transform.from_matrix(world), name=name)
+    try:
+        x, placement, params = _finish(x, placement, world_from_frame, name)
+    except ParamError:
+        # the solve ran into a shape the model cannot draw (an axis with no in-plane direction at
+        # a silhouette row, found on two stacked leaves): keep the drawable start, the enclosing
+        # ellipse, and let its residuals say how little it explains
+        x, placement, params = _finish(x0, placement0, world_from_frame, name)
     q_all = _to_leaf(placement, frame)
     uv_all, dist_all, _ = qm.project(x, q_all)
     weights = _scan_weights(q_all, uv_all, x, scanlines, ellipse, placement)
@@ -432,6 +432,21 @@ def fit_cloud(points: ArrayLike, *, scanlines: int = 24, max_iterations: int = 1
                      uv=uv_all, weights=weights, ellipse=ellipse, length=length,
                      rms=float(np.sqrt(np.mean(dist_all * dist_all))), median=median,
                      explained=median <= EXPLAINED_LIMIT)
+
+
+def _finish(x: Arr, placement: Arr, world_from_frame: Arr, name: str) -> tuple[Arr, Arr, LeafParams]:
+    """The solved ``x`` as a leaf: the sign and base-end conventions of :func:`fit_cloud` applied,
+    Ω clipped to its limits, placed in the cloud's frame. Raises ParamError for a shape
+    :class:`LeafParams` refuses."""
+    omega = qm.to_omega(x)
+    if omega[9:12].sum() < 0.0:             # the same surface with the sides' names swapped
+        omega[9:12] = -omega[9:12]
+    if _base_is_narrow(qm.from_omega(omega)):
+        omega, placement = qm.reversed_omega(omega), placement @ qm.REVERSE
+    x = qm.from_omega(np.clip(omega, -OMEGA_LIMIT, OMEGA_LIMIT))
+    world = world_from_frame @ placement
+    params = LeafParams.from_vector(qm.to_omega(x)).replace(transform=Transform.from_matrix(world), name=name)
+    return x, placement, params
 
 
 # -- distances and samples -------------------------------------------------------------------------
