@@ -38,6 +38,7 @@ from leafview.fit.cloud import fit_cloud, surface_distance
 from leafview.fit.evaluate import evaluate_capture
 from leafview.fit.synthetic import curled, occluded_cloud
 from leafview.fit.views import read_views
+from leafview.gpu.resources import GpuResources
 from leafview.resources import builtin_presets
 from leafview.scene.spec import SceneSpec, build_scene
 
@@ -73,11 +74,12 @@ def _plant(ctx: moderngl.Context, quick: bool, progress: Progress) -> dict[str, 
     spec = SceneSpec(species=(LeafParams.load(builtin_presets()["ovate"]),), name="plant", leaves=leaves,
                      layout="plant", seed=PLANT_SEED)   # what `leafview scene --layout plant` builds
     scene = build_scene(spec)
-    with tempfile.TemporaryDirectory(prefix="leafview-bench-capture-") as tmp:
+    resources = GpuResources(ctx)   # one set of programs for the views and every view's ids
+    with resources, tempfile.TemporaryDirectory(prefix="leafview-bench-capture-") as tmp:
         out = Path(tmp) / "views"
         progress.step(f"rendering {views} views of {leaves} leaves")
         render_views(ctx, scene, out, views=views, size=size, depth_noise=DEPTH_NOISE,
-                     holes=HOLES, seed=PLANT_SEED)
+                     holes=HOLES, seed=PLANT_SEED, resources=resources)
         progress.step("capturing")
         t0 = time.perf_counter()
         read = read_views(out)
@@ -86,7 +88,7 @@ def _plant(ctx: moderngl.Context, quick: bool, progress: Progress) -> dict[str, 
         progress.step("scoring")
         truth = scene.placed_leaves()
         predicted = [render_instance_ids(ctx, list(result.leaves), v.k, v.world_from_camera,
-                                         (v.depth.shape[1], v.depth.shape[0])) for v in read]
+                                         (v.depth.shape[1], v.depth.shape[0]), resources=resources) for v in read]
         cameras = []
         for v in read:
             assert v.instance is not None   # render_views wrote it

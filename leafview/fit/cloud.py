@@ -469,7 +469,7 @@ def _adjacent_triangles(nu: int, nv: int) -> NDArray[np.int64]:
     return _ADJACENT[key]
 
 
-def _closest_on_triangles(p: Arr, a: Arr, b: Arr, c: Arr) -> Arr:
+def closest_on_triangles(p: Arr, a: Arr, b: Arr, c: Arr) -> Arr:
     """The closest point of each triangle (a, b, c) to p, all (M, 3) (Ericson's region tests;
     degenerate triangles are safe)."""
     dot = lambda x, y: np.einsum("nd,nd->n", x, y)  # noqa: E731
@@ -519,7 +519,7 @@ def surface_distance(points: ArrayLike, params: LeafParams, *, grid: tuple[int, 
     valid = flat >= 0
     rows, flat = rows[valid], flat[valid]
     t = tri[flat]
-    closest = _closest_on_triangles(p[rows], verts[t[:, 0]], verts[t[:, 1]], verts[t[:, 2]])
+    closest = closest_on_triangles(p[rows], verts[t[:, 0]], verts[t[:, 1]], verts[t[:, 2]])
     dist = np.linalg.norm(closest - p[rows], axis=1)
     out = np.full(len(p), np.inf)
     np.minimum.at(out, rows, dist)

@@ -48,6 +48,7 @@ from leafview.core.blade import drawn_uv, normal_from
 from leafview.core.params import LeafParams
 from leafview.deform.surface import partials
 from leafview.errors import ParamError
+from leafview.fit.cloud import closest_on_triangles
 
 __all__ = ["VISIBILITY_BINS", "MIN_IOU", "VISIBILITY_SAMPLES", "CHAMFER_SAMPLES", "Match", "CaptureEvaluation",
            "LeafMeasures", "visibility", "match_leaves", "chamfer", "leaf_measures", "evaluate_capture"]
@@ -170,33 +171,6 @@ def _angle(a: Arr, b: Arr, *, unsigned: bool = False) -> float:
     return math.degrees(math.atan2(float(np.linalg.norm(np.cross(a, b))), abs(dot) if unsigned else dot))
 
 
-def _dot(a: Arr, b: Arr) -> Arr:
-    return np.einsum("...i,...i->...", a, b)
-
-
-def _segment_distance(p: Arr, a: Arr, b: Arr) -> Arr:
-    ab = b - a
-    den = _dot(ab, ab)
-    t = np.clip(np.divide(_dot(p - a, ab), den, out=np.zeros_like(den), where=den > 0.0), 0.0, 1.0)
-    return np.asarray(np.linalg.norm(p - (a + t[..., None] * ab), axis=-1))
-
-
-def _triangle_distance(p: Arr, a: Arr, b: Arr, c: Arr) -> Arr:
-    """Distance from points ``p`` to triangles ``abc`` (broadcast, (..., 3)): to the plane where
-    the foot of the perpendicular falls inside, else to the nearest edge."""
-    ab, ac, ap = b - a, c - a, p - a
-    n = np.cross(ab, ac)
-    nn = _dot(n, n)
-    ok = nn > 0.0
-    safe = np.where(ok, nn, 1.0)
-    wb = _dot(np.cross(ap, ac), n) / safe
-    wc = _dot(np.cross(ab, ap), n) / safe
-    inside = ok & (wb >= 0.0) & (wc >= 0.0) & (wb + wc <= 1.0)
-    plane = np.abs(_dot(ap, n)) / np.sqrt(safe)
-    edges = np.minimum(np.minimum(_segment_distance(p, a, b), _segment_distance(p, b, c)), _segment_distance(p, c, a))
-    return np.where(inside, plane, edges)
-
-
 def _directed(a: _Surface, b: _Surface, tree_b: cKDTree) -> float:
     """Area-weighted mean distance from ``a``'s samples to ``b``'s triangulated grid: each sample
     is measured against the two triangles of every grid cell around its nearest vertices."""
@@ -210,7 +184,9 @@ def _directed(a: _Surface, b: _Surface, tree_b: cKDTree) -> float:
     corners = np.concatenate([np.stack([p00, p00 + nu, p00 + 1], axis=-1),
                               np.stack([p00 + 1, p00 + nu, p00 + nu + 1], axis=-1)], axis=1)
     v = b.points
-    distance = _triangle_distance(a.points[:, None, :], v[corners[..., 0]], v[corners[..., 1]], v[corners[..., 2]])
+    tri = [v[corners[..., k]].reshape(-1, 3) for k in range(3)]
+    p = np.repeat(a.points, corners.shape[1], axis=0)
+    distance = np.linalg.norm(closest_on_triangles(p, *tri) - p, axis=1).reshape(corners.shape[:2])
     return float(a.weights @ distance.min(axis=1))
 
 
