@@ -35,5 +35,8 @@ def test_shapes_bench_quick_run_fills_the_table(gl):
     res = run(quick=True, ctx=gl.ctx)
     table = format_table(res)
     assert res["gl_renderer"] == gl.ctx.info["GL_RENDERER"] and "vs the paper's ~550 /s" in table
-    assert "landmark leaves, batched" in table and "batched ÷ per-leaf" in table
+    assert "landmark leaves end to end" in table and "full batch fit" in table
+    parts = sum(res[f"landmark_{k}_ms"] for k in ("generate", "fit", "pack", "draw"))
+    assert abs(1e3 / parts - res["landmark_leaves_per_s"]) <= 1e-9 * res["landmark_leaves_per_s"]
+    assert 0.0 <= res["landmark_fit_within_target"] <= 1.0 and res["landmark_fit_error_max"] > 0.0
     json.dumps(res)

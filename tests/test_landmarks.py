@@ -10,7 +10,8 @@ import sys
 import numpy as np
 import pytest
 
-from leafview.botany.catalogue import catalogue, landmark_leaf
+from leafview.botany.catalogue import catalogue, catalogue_names, landmark_leaf, random_instance
+from leafview.botany.hermite import margin_pieces
 from leafview.botany.landmarks import (
     LandmarkLeaf,
     SideLandmarks,
@@ -20,6 +21,7 @@ from leafview.botany.landmarks import (
     hermite_knots,
     outline,
     outline_sides,
+    outlines,
     side_fit,
 )
 from leafview.core.params import ParamError
@@ -238,3 +240,47 @@ def test_landmark_modules_never_import_gl():
             "print(bad); sys.exit(1 if bad else 0)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=False)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+# -- many margins at once ---------------------------------------------------------------------------
+@pytest.mark.parametrize("n", [2, 3, 5, 6])
+def test_margin_pieces_equal_the_fitted_spline(n):
+    """The closed form as quadratic Bézier pieces (batched) against the solved B-spline of eqs 3-4,
+    random landmarks, a coincident pair (the singular case) included."""
+    rng = np.random.default_rng(300 + n)
+    sets = [_random_landmarks(rng, n) for _ in range(12)]
+    pts, tan = np.stack([p for p, _ in sets]), np.stack([t for _, t in sets])
+    if n >= 3:
+        pts[0, 1] = pts[0, 0]                      # singular: closed form on both sides
+    u = np.linspace(0.0, 1.0, 257)
+    got = margin_pieces(pts, tan)(u)
+    for k in range(len(sets)):
+        np.testing.assert_allclose(got[k], fit_margin(pts[k], tan[k])(u), atol=1e-9)
+    per_leaf_u = np.sort(rng.uniform(0, 1, (len(sets), 33)), axis=1)
+    for k, row in enumerate(margin_pieces(pts, tan)(per_leaf_u)):
+        np.testing.assert_allclose(row, fit_margin(pts[k], tan[k])(per_leaf_u[k]), atol=1e-9)
+
+
+def test_margin_pieces_bad_input_is_named():
+    for pts, tan, field in ((np.zeros((2, 3)), np.zeros((2, 3)), "points"),
+                            (np.zeros((1, 3, 2)), np.ones((1, 2, 2)), "tangents"),
+                            (np.zeros((1, 3, 2)), np.zeros((1, 3, 2)), "tangents"),
+                            (np.zeros((1, 3, 2)), np.ones((1, 3, 2)), "points")):
+        with pytest.raises(ParamError) as err:
+            margin_pieces(pts, tan)
+        assert err.value.path == field
+
+
+def test_outlines_equal_outline_leaf_by_leaf():
+    names = catalogue_names()
+    leaves = [random_instance(landmark_leaf(names[k % 62]), k, independent_sides=k % 3 == 0) for k in range(70)]
+    for spacing, n in (("arclength", 128), ("parameter", 40), ("arclength", 7)):
+        batch = outlines(leaves, n, spacing=spacing)
+        assert batch.shape == (70, 2 * n - 2, 2)
+        for k, leaf in enumerate(leaves):
+            np.testing.assert_allclose(batch[k], outline(leaf, n, spacing=spacing), atol=1e-12)
+    with pytest.raises(ParamError) as err:
+        outlines([leaves[0], "ovate"])
+    assert err.value.path == "leaves[1]"
+    with pytest.raises(ValueError):
+        outlines(leaves, 1)

@@ -17,13 +17,17 @@ is asserted:
 * ``extended_vs_quartic_frame``: frame time of leaves on the extended silhouette path ÷ the same
   count of the paper's quartic leaves (the cost of the extension);
 * bytes of the leaf record;
-* ``landmark_leaves_per_s`` (issue 6 §7): random instances of all 62 catalogue shapes generated
-  (:func:`~leafview.botany.catalogue.random_instance` and its margin), fitted to within 1 % in one
-  batch (:func:`~leafview.botany.batch_fit.fit_outlines`) and rendered as thumbnails
-  (:meth:`~leafview.gpu.renderer.LeafRenderer.render_many`, 128², grid 32 × 64, read back), per
-  second, against ``landmark_leaves_per_s_per_leaf``: the same leaves (a subset) through the old
-  path, one :func:`~leafview.botany.outline_fit.fit_outline` each (least-squares polish); both
-  divided by the paper's 550 /s.
+* ``landmark_leaves_per_s`` (issue 20): random instances of all 62 catalogue shapes end to end,
+  per leaf: generated (:func:`~leafview.botany.catalogue.random_instance` and the margins,
+  :func:`~leafview.botany.landmarks.outlines`), made shader-ready (Ω fitted to within 1 % by
+  :func:`~leafview.botany.quick_fit.quick_fit_outlines`, placed and packed into leaf records) and
+  drawn (upload and one instanced draw of the whole batch, as ``render_per_s``), with its parts
+  (``landmark_generate_ms``, ``landmark_fit_ms``, ``landmark_pack_ms``, ``landmark_draw_ms``),
+  the draw alone (``landmark_draw_only_per_s``), this process's CPU time per leaf
+  (``landmark_cpu_ms``, all threads: other jobs on a shared machine move it less than the wall
+  time) and the outline error of the fits as :func:`~leafview.botany.batch_fit.outline_errors` measures it (median / p95 / max, share within
+  1 % without a fold, rows); ``landmark_full_*``: a subset of the same leaves through the full
+  batch fit (:func:`~leafview.botany.batch_fit.fit_outlines`, with its per-leaf fallback).
 """
 
 from __future__ import annotations
@@ -35,18 +39,19 @@ from typing import Any
 import moderngl
 import numpy as np
 
-from leafview.bench import PAPER_LEAVES_PER_S, THUMB_GRID, THUMB_SIZE
+from leafview.bench import PAPER_LEAVES_PER_S
 from leafview.bench.timing import bench_context, gl_info, median_time
-from leafview.botany.batch_fit import fit_outlines
+from leafview.botany.batch_fit import controls_from_params, fit_outlines, outline_errors, split_outlines
 from leafview.botany.catalogue import catalogue_names, landmark_leaf, random_instance
-from leafview.botany.landmarks import outline
+from leafview.botany.landmarks import outline, outlines
 from leafview.botany.outline_fit import fit_outline
+from leafview.botany.quick_fit import quick_fit_outlines
 from leafview.botany.shapes import INSTANCE_TARGET, shapes_params
 from leafview.core.params import LeafParams, Transform
 from leafview.gpu.context import check_error
 from leafview.gpu.instanced import InstancedLeaves, OffscreenTarget
 from leafview.gpu.layout import LEAF_BLOCK, pack_leaves
-from leafview.gpu.renderer import LeafRenderer
+from leafview.gpu.resources import GpuResources
 from leafview.scene.camera import top_down
 
 __all__ = ["run", "format_table"]
@@ -95,71 +100,91 @@ def _frame_time(ctx: moderngl.Context, leaves: list[Any], repeats: int) -> tuple
             return median_time(frame, repeats, ctx.finish), upload
 
 
+def _draw_batch(ctx: moderngl.Context, resources: GpuResources, target: OffscreenTarget, records: Any,
+                tables: Any) -> None:
+    """Upload ``records`` and draw them once (the instanced path, ``GRID``, into ``target``), waited for."""
+    with InstancedLeaves(ctx, records, GRID, jitter_tables=tables, resources=resources) as inst:
+        inst.set_camera(top_down((0.0, 0.0), 10.0, 1.0, 1.0, 20.0))
+        target.clear()
+        inst.draw()
+        ctx.finish()
+
+
 def _landmark_rates(ctx: moderngl.Context, res: dict[str, Any], quick: bool) -> None:
-    """Issue 6 §7: landmark leaves generated, fitted and rendered per second, batched path and
-    per-leaf path side by side (same leaves, same renderer, same thumbnail size)."""
+    """Issue 20: landmark leaves per second end to end. Each repeat makes ``count`` random
+    instances of all 62 catalogue shapes and times, per leaf: *generate* (the instances and their
+    margins, :func:`~leafview.botany.landmarks.outlines`), *shader-ready* (Ω fitted to within 1 %
+    by :func:`~leafview.botany.quick_fit.quick_fit_outlines`, placed on a grid and packed into
+    leaf records) and *draw* (upload and one instanced draw of the batch, as ``render_per_s``).
+    The fitted margins' outline error is then measured (untimed) with
+    :func:`~leafview.botany.batch_fit.outline_errors`. Side by side, a subset goes through the
+    full batch fit (:func:`~leafview.botany.batch_fit.fit_outlines`, with its per-leaf fallback)."""
     names = catalogue_names()
-    count, repeats, n_old = (62, 1, 2) if quick else (248, 3, 8)
+    count, repeats, n_full = (248, 3, 62) if quick else (992, 5, 124)
     bases = [landmark_leaf(names[i % len(names)]) for i in range(count)]
-
-    def generate(k: int) -> tuple[list[Any], np.ndarray]:
-        leaves = [random_instance(bases[i], seed=i, amount=0.2) for i in range(k)]
-        return leaves, np.stack([outline(leaf, 128) for leaf in leaves])
-
-    renderer = LeafRenderer(ctx)
+    resources = GpuResources(ctx)
     try:
-        renderer.render_many(_warm_leaves(), THUMB_SIZE, "top", grid=THUMB_GRID)  # compile the shader variants
-        ctx.finish()
-        stages: dict[str, list[float]] = {"generate": [], "fit": [], "render": []}
-        fit = None
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            leaves, rings = generate(count)
-            t1 = time.perf_counter()
-            fit = fit_outlines(rings, target=INSTANCE_TARGET, names=[leaf.name for leaf in leaves])
-            t2 = time.perf_counter()
-            renderer.render_many(fit.params, THUMB_SIZE, "top", grid=THUMB_GRID)
-            ctx.finish()
-            t3 = time.perf_counter()
-            for key, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2)):
-                stages[key].append(dt / count)
-        assert fit is not None
-        per = {k: statistics.median(v) for k, v in stages.items()}
-        res["landmark_count"] = count
-        res["landmark_thumbnail"] = list(THUMB_SIZE)
-        res["landmark_generate_ms"] = 1e3 * per["generate"]
-        res["landmark_fit_batched_ms"] = 1e3 * per["fit"]
-        res["landmark_render_ms"] = 1e3 * per["render"]
-        res["landmark_leaves_per_s"] = 1.0 / sum(per.values())
-        summary = fit.summary()
-        res["landmark_fit_error_median"] = summary["error_median"]
-        res["landmark_fit_error_p95"] = summary["error_p95"]
-        res["landmark_fit_error_max"] = summary["error_max"]
-        res["landmark_fit_rows"] = {str(k): v for k, v in summary["rows"].items()}
-        res["landmark_fit_fallback"] = summary["fallback"]
-        res["landmark_fit_missed"] = summary["missed"]
+        with OffscreenTarget(ctx, SIZE) as target:
+            target.use()
+            warm = pack_leaves(_scatter(_warm_leaves(), 2))
+            _draw_batch(ctx, resources, target, *warm)      # compile the programs once
+            stages: dict[str, list[float]] = {"generate": [], "fit": [], "pack": [], "draw": []}
+            cpu: list[float] = []
+            fit, rings = None, None
+            for rep in range(repeats):
+                c0, t0 = time.process_time(), time.perf_counter()
+                leaves = [random_instance(bases[i], seed=rep * count + i, amount=0.2) for i in range(count)]
+                rings = outlines(leaves, 128)
+                t1 = time.perf_counter()
+                fit = quick_fit_outlines(rings, target=INSTANCE_TARGET, names=[leaf.name for leaf in leaves])
+                t2 = time.perf_counter()
+                records, tables = pack_leaves(_scatter(fit.params, count))
+                t3 = time.perf_counter()
+                _draw_batch(ctx, resources, target, records, tables)
+                t4 = time.perf_counter()
+                cpu.append((time.process_time() - c0) / count)
+                for key, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
+                    stages[key].append(dt / count)
+            assert fit is not None and rings is not None
+            per = {k: statistics.median(v) for k, v in stages.items()}
+            res["landmark_count"] = count
+            for key, value in per.items():
+                res[f"landmark_{key}_ms"] = 1e3 * value
+            res["landmark_leaves_per_s"] = 1.0 / sum(per.values())
+            # CPU seconds of this process (all its threads, llvmpipe's included) per leaf: less
+            # sensitive than wall time to the other jobs sharing the machine
+            res["landmark_cpu_ms"] = 1e3 * statistics.median(cpu)
+            res["landmark_vs_paper_550"] = res["landmark_leaves_per_s"] / PAPER_LEAVES_PER_S
+            res["landmark_draw_only_per_s"] = 1.0 / per["draw"]
+            right, left = split_outlines(rings)
+            measured = outline_errors(controls_from_params(fit.params), right, left)[:, 0]
+            res.update(_error_figures("landmark_fit", measured, fit.min_jacobian, fit.rows))
+            res["landmark_fit_bound_gap"] = float(np.max(measured - fit.errors))
 
-        # the old path on a subset of the same leaves: one polished fit and one render per leaf
-        step = count // n_old
-        t0 = time.perf_counter()
-        leaves = [random_instance(bases[i], seed=i, amount=0.2) for i in range(0, count, step)][:n_old]
-        old_rings = [outline(leaf, 128) for leaf in leaves]
-        t1 = time.perf_counter()
-        old = [fit_outline(ring, target=INSTANCE_TARGET).params for ring in old_rings]
-        t2 = time.perf_counter()
-        for params in old:
-            renderer.render(params, THUMB_SIZE, "top", grid=THUMB_GRID)
-        ctx.finish()
-        t3 = time.perf_counter()
-        res["landmark_per_leaf_count"] = n_old
-        res["landmark_fit_per_leaf_ms"] = 1e3 * (t2 - t1) / n_old
-        res["landmark_leaves_per_s_per_leaf"] = n_old / (t3 - t0)
-        res["landmark_batched_vs_per_leaf"] = res["landmark_leaves_per_s"] / res["landmark_leaves_per_s_per_leaf"]
-        res["landmark_fit_speedup"] = res["landmark_fit_per_leaf_ms"] / res["landmark_fit_batched_ms"]
-        res["landmark_vs_paper_550"] = res["landmark_leaves_per_s"] / PAPER_LEAVES_PER_S
-        res["landmark_per_leaf_vs_paper_550"] = res["landmark_leaves_per_s_per_leaf"] / PAPER_LEAVES_PER_S
+            # side by side: the same kind of leaves through the full batch fit (a subset)
+            t0 = time.perf_counter()
+            full = fit_outlines(rings[:n_full], target=INSTANCE_TARGET, names=[p.name for p in fit.params[:n_full]])
+            t1 = time.perf_counter()
+            _draw_batch(ctx, resources, target, *pack_leaves(_scatter(full.params, n_full)))
+            t2 = time.perf_counter()
+            res["landmark_full_count"] = n_full
+            res["landmark_full_fit_ms"] = 1e3 * (t1 - t0) / n_full
+            res["landmark_full_leaves_per_s"] = 1.0 / (per["generate"] + (t2 - t0) / n_full)
+            res.update(_error_figures("landmark_full_fit", full.errors, full.min_jacobian, full.rows))
+            res["landmark_full_fit_fallback"] = full.n_fallback
+            res["landmark_fit_speedup"] = res["landmark_full_fit_ms"] / res["landmark_fit_ms"]
     finally:
-        renderer.release()
+        resources.release()
+
+
+def _error_figures(key: str, errors: Any, min_jacobian: Any, rows: Any) -> dict[str, Any]:
+    """Median / 95th percentile / largest outline error, the share of leaves within
+    ``INSTANCE_TARGET`` without a fold, and the rows histogram, under ``key``."""
+    e = np.asarray(errors, np.float64)
+    ok = (e <= INSTANCE_TARGET) & (np.asarray(min_jacobian) > 0.0)
+    return {f"{key}_error_median": float(np.median(e)), f"{key}_error_p95": float(np.percentile(e, 95)),
+            f"{key}_error_max": float(e.max()), f"{key}_within_target": float(ok.mean()),
+            f"{key}_rows": {str(k): int(v) for k, v in zip(*np.unique(rows, return_counts=True))}}
 
 
 def _warm_leaves() -> list[LeafParams]:
@@ -239,21 +264,24 @@ def format_table(res: dict[str, Any]) -> str:
         ("leaf record: parameters / whole", f"{res['param_bytes']} B / {res['record_bytes']} B"),
     ]
     if "landmark_leaves_per_s" in res:
-        size = "×".join(str(s) for s in res["landmark_thumbnail"])
+        def errors(key: str) -> str:
+            return (f"{pct(res[key + '_error_median'])} / {pct(res[key + '_error_p95'])} / {pct(res[key + '_error_max'])}"
+                    f"  (within 1 %: {pct(res[key + '_within_target'])})")
+
         rows += [
-            (f"landmark leaves, batched ({res['landmark_count']} of all 62 shapes, {size} thumbnails)",
-             f"{res['landmark_leaves_per_s']:,.1f} /s  (generate {res['landmark_generate_ms']:.2f} + fit "
-             f"{res['landmark_fit_batched_ms']:.2f} + render {res['landmark_render_ms']:.2f} ms/leaf)"),
-            ("  batched fit error (median / p95 / max)", f"{pct(res['landmark_fit_error_median'])} / "
-             f"{pct(res['landmark_fit_error_p95'])} / {pct(res['landmark_fit_error_max'])}  (fallbacks "
-             f"{res['landmark_fit_fallback']}, above 1 %: {res['landmark_fit_missed']})"),
+            (f"landmark leaves end to end ({res['landmark_count']} of all 62 shapes, 224 tri, 512²)",
+             f"{res['landmark_leaves_per_s']:,.1f} /s  (generate {res['landmark_generate_ms']:.3f} + fit "
+             f"{res['landmark_fit_ms']:.3f} + pack {res['landmark_pack_ms']:.3f} + draw "
+             f"{res['landmark_draw_ms']:.3f} ms/leaf)"),
+            ("  CPU time per leaf, all threads of this process", f"{res['landmark_cpu_ms']:.3f} ms"),
+            ("  vs the paper's ~550 /s (end to end / draw only)", f"{res['landmark_vs_paper_550']:.3g}× / "
+             f"{res['landmark_draw_only_per_s'] / res['paper_leaves_per_s']:.3g}×"),
+            ("  quick fit error (median / p95 / max)", errors("landmark_fit")),
             ("  rows per leaf", ", ".join(f"{k}: {v}" for k, v in res["landmark_fit_rows"].items())),
-            (f"landmark leaves, per-leaf polished fit ({res['landmark_per_leaf_count']} of them)",
-             f"{res['landmark_leaves_per_s_per_leaf']:,.2f} /s  (fit {res['landmark_fit_per_leaf_ms']:.0f} ms/leaf)"),
-            ("  batched ÷ per-leaf (end to end / fit only)", f"{res['landmark_batched_vs_per_leaf']:.1f}× / "
-             f"{res['landmark_fit_speedup']:.1f}×"),
-            ("  vs the paper's ~550 /s (batched / per-leaf)", f"{res['landmark_vs_paper_550']:.3g}× / "
-             f"{res['landmark_per_leaf_vs_paper_550']:.3g}×"),
+            (f"landmark leaves, full batch fit ({res['landmark_full_count']} of them)",
+             f"{res['landmark_full_leaves_per_s']:,.1f} /s  (fit {res['landmark_full_fit_ms']:.1f} ms/leaf, "
+             f"{res['landmark_full_fit_fallback']} fallbacks; quick fit {res['landmark_fit_speedup']:.0f}× faster)"),
+            ("  full fit error (median / p95 / max)", errors("landmark_full_fit")),
         ]
     width = max(len(r[0]) for r in rows)
     head = f"leafview shapes benchmark{' (quick)' if res['quick'] else ''}: {res['gl_renderer']}"

@@ -30,7 +30,8 @@ stacked arrays:
 5. **Error.** The same measure as :func:`~leafview.botany.outline_fit.outline_error`: the symmetric
    Hausdorff distance between the margin (1025 samples of S, both polylines densified to 1e-3)
    and each target side, ÷ the leaf length (1). It is batched by placing every leaf's points far
-   apart in one k-d tree, so one query answers all leaves.
+   apart in one k-d tree, so one query answers all leaves; the side → margin distances start
+   from the nearest of 1025 margin samples (found the same way) and are refined by Newton steps.
 
 Control points become silhouette rows through
 :func:`~leafview.botany.outline_fit.rows_from_controls` and the fold check is
@@ -43,13 +44,14 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from leafview.botany.landmarks import LandmarkLeaf, outline
+from leafview.botany.landmarks import LandmarkLeaf, outlines
 from leafview.botany.outline_fit import (
     _FOLD_MARGIN,
     _FOLD_WEIGHT,
@@ -57,9 +59,10 @@ from leafview.botany.outline_fit import (
     _JAC_S,
     _JAC_V,
     _densify,
+    _feet_rows,
     _jacobian_grid,
-    _params_from_controls,
     fit_outline,
+    params_from_controls,
 )
 from leafview.botany.outline_fit import _project as _project_feet  # one foot-point Newton for one curve or a batch
 from leafview.core.bezier import bernstein, derivative_points
@@ -67,7 +70,7 @@ from leafview.core.defaults import INSTANCE_FIT_TARGET
 from leafview.core.params import MAX_SILHOUETTE_ROWS, LeafParams, ParamError
 
 __all__ = ["BatchFit", "fit_outlines", "fit_landmark_leaves", "fit_sides", "minimax_sides", "elevate",
-           "controls_from_params", "outline_errors", "jacobian_grids", "DEFAULT_BATCH_TARGET"]
+           "controls_from_params", "outline_errors", "jacobian_grids", "split_outlines", "DEFAULT_BATCH_TARGET"]
 
 DEFAULT_BATCH_TARGET = INSTANCE_FIT_TARGET
 _SAMPLES = 80                 # samples per side in the fit (as fit_outline)
@@ -82,8 +85,8 @@ _MARGIN_SAMPLES = 1025        # samples of the fitted margin in the error (as ou
 _ERROR_STEP = 1e-3            # target sides densified to this for the margin -> side distance (as hausdorff)
 _SPREAD = 16.0                # sides are this far apart in the shared k-d tree (leaf space: ~2 wide)
 _TARGET_PARTS = 2             # target segments cut into this many pieces for the side -> margin distance
-_CURVE_SEEDS = 33             # start parameters of the projection onto the fitted margin
-_CURVE_NEWTON = 8             # Newton steps of that projection
+_CURVE_SEEDS = 1025           # start parameters of the projection onto the fitted margin
+_CURVE_NEWTON = 4             # Newton steps of that projection
 
 
 @dataclass(frozen=True)
@@ -189,6 +192,13 @@ def _split_batch(outlines: NDArray[np.float64]) -> tuple[NDArray[np.float64], ND
     return right, np.ascontiguousarray(left)
 
 
+def split_outlines(outlines: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(right, left) sides (B, n, 2), base to apex, of closed outlines (B, 2n - 2, 2) as
+    :func:`~leafview.botany.landmarks.outlines` writes them (the batched
+    :func:`~leafview.botany.outline_fit.split_outline`)."""
+    return _split_batch(_as_batch(outlines, "outlines", 6))
+
+
 # -- batched geometry -----------------------------------------------------------------------------
 def _chord(points: NDArray[np.float64]) -> NDArray[np.float64]:
     """(B, K): chord-length parameters of the (B, K, 2) polylines, 0 at the first point and 1 at
@@ -252,7 +262,7 @@ def _feet_batch(y: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np
     hi = 1.0 - _FOOT_GAP * np.arange(n, 0, -1)
     g = np.clip(y, lo, hi) - step
     acc = np.maximum.accumulate(g, axis=1)
-    feet = np.minimum(acc + step, hi)
+    feet = _feet_rows(y)
     idx = np.where(g >= acc, np.arange(n), 0)
     source = np.maximum.accumulate(idx, axis=1)                          # the row each foot follows
     follows = (y > lo) & (y < hi)
@@ -262,13 +272,19 @@ def _feet_batch(y: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np
     return feet, d
 
 
+@lru_cache(maxsize=16)
+def _fold_bases(n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Bernstein bases of degrees n and n - 1 on the fold grid's v samples (fixed: computed once)."""
+    return bernstein(n, _JAC_V), bernstein(n - 1, _JAC_V)
+
+
 def _jacobian_parts(ctrl: NDArray[np.float64]) -> dict[str, Any]:
     """Pieces of eq. 6's in-plane map on the fold grid for a batch of control polygons."""
     n = ctrl.shape[1] - 1
     pctrl = np.zeros_like(ctrl)
     pctrl[:, 1:-1, 1], dfeet = _feet_batch(ctrl[:, 1:-1, 1])
     pctrl[:, -1, 1] = 1.0
-    bn, bd = bernstein(n, _JAC_V), bernstein(n - 1, _JAC_V)
+    bn, bd = _fold_bases(n)
     S, dS = bn @ ctrl, bd @ derivative_points(ctrl)
     P, dP = bn @ pctrl, bd @ derivative_points(pctrl)
     A = np.stack([np.zeros_like(_JAC_V), _JAC_V], axis=-1)
@@ -469,12 +485,20 @@ def _subdivide(lines: NDArray[np.float64], parts: int) -> NDArray[np.float64]:
 
 
 def _to_curve(points: NDArray[np.float64], ctrl: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(B, P) distance of each point to its leaf's Bézier (B, n + 1, 2): nearest of
-    ``_CURVE_SEEDS`` parameters, then Newton projection (never below the true distance)."""
+    """(B, P) distance of each point to its leaf's Bézier (B, n + 1, 2): the nearest of
+    ``_CURVE_SEEDS`` even parameters (one k-d tree for the batch, leaves kept apart as in
+    :class:`_SideTree`), then Newton projection within that parameter step (never below the true
+    distance)."""
     seeds = np.linspace(0.0, 1.0, _CURVE_SEEDS)
+    b, p = points.shape[:2]
     on = bernstein(ctrl.shape[1] - 1, seeds) @ ctrl                        # (B, seeds, 2)
-    d2 = np.sum((points[:, :, None, :] - on[:, None]) ** 2, axis=3)
-    t = seeds[np.argmin(d2, axis=2)]
+    shift = np.c_[_SPREAD * np.repeat(np.arange(b, dtype=np.float64), _CURVE_SEEDS), np.zeros(b * _CURVE_SEEDS)]
+    tree = cKDTree(on.reshape(-1, 2) + shift)
+    lanes = np.c_[_SPREAD * np.repeat(np.arange(b, dtype=np.float64), p), np.zeros(b * p)]
+    hit = tree.query(points.reshape(-1, 2) + lanes)[1]
+    if np.any(hit // _CURVE_SEEDS != np.repeat(np.arange(b), p)):
+        raise RuntimeError("batched Hausdorff: a nearest point belongs to another leaf (margin far off?)")
+    t = seeds[hit % _CURVE_SEEDS].reshape(b, p)
     n = ctrl.shape[1] - 1
     d1 = derivative_points(ctrl)
     dd = derivative_points(d1)
@@ -485,7 +509,7 @@ def _to_curve(points: NDArray[np.float64], ctrl: NDArray[np.float64]) -> NDArray
         num = np.sum(r * s1, axis=2)
         den = np.sum(s1 * s1, axis=2) + np.sum(r * s2, axis=2)
         step = np.where(den > 1e-12, num / np.where(den > 1e-12, den, 1.0), 0.0)
-        t = np.clip(t - np.clip(step, -0.5 / _CURVE_SEEDS, 0.5 / _CURVE_SEEDS), 0.0, 1.0)
+        t = np.clip(t - np.clip(step, -1.0 / _CURVE_SEEDS, 1.0 / _CURVE_SEEDS), 0.0, 1.0)
     return np.linalg.norm(bernstein(n, t) @ ctrl - points, axis=2)
 
 
@@ -629,7 +653,7 @@ def fit_outlines(outlines: ArrayLike | None = None, *, right: ArrayLike | None =
     def keep_better(ctrl: NDArray[np.float64], n_rows: int) -> NDArray[np.bool_]:
         """Measure the fits ``ctrl`` of the leaves ``todo``, keep each where it beats the leaf's
         best so far (no fold first, then the smaller error); True where it meets the target."""
-        fitted = [_params_from_controls(c, names[int(i)]) for c, i in zip(ctrl, todo)]
+        fitted = params_from_controls(ctrl, [names[int(i)] for i in todo])
         err = meter(controls_from_params(fitted), todo)
         jmin = np.array([float(_jacobian_grid(c).min()) for c in ctrl])
         for k, i in enumerate(todo):
@@ -677,7 +701,7 @@ def fit_landmark_leaves(leaves: Sequence[LandmarkLeaf], *, n: int = 128, **optio
             raise ParamError(f"leaves[{k}]", f"expected a LandmarkLeaf, got {type(leaf).__name__}")
     if len(leaves) == 0:
         raise ParamError("leaves", "expected at least one leaf")
-    rings = np.stack([outline(leaf, n) for leaf in leaves])
+    rings = outlines(leaves, n)
     options.setdefault("names", [leaf.name or "" for leaf in leaves])
     return fit_outlines(rings, **options)
 

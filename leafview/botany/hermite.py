@@ -18,7 +18,8 @@ from scipy.interpolate import BSpline
 
 from leafview.core.params import ParamError
 
-__all__ = ["SINGULAR_CONDITION", "MarginFit", "chord_parameters", "fit_margin", "fit_margin_report", "hermite_knots"]
+__all__ = ["SINGULAR_CONDITION", "MarginFit", "MarginPieces", "chord_parameters", "fit_margin", "fit_margin_report",
+           "hermite_knots", "margin_pieces"]
 
 #: Above this condition number of the 2N×2N collocation matrix (eqs 3-4) the linear solve is
 #: replaced by the closed form (the matrix is exactly singular when two consecutive landmarks
@@ -190,3 +191,82 @@ def fit_margin(points: ArrayLike, tangents: ArrayLike, alpha: ArrayLike | None =
     :func:`fit_margin_report` for the parameters and for the condition number.
     """
     return fit_margin_report(points, tangents, alpha).spline
+
+
+# ---------------------------------------------------------------------------------------------
+# many margins at once: the closed form as quadratic Bézier pieces
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class MarginPieces:
+    """A batch of margins of eqs 2-6 (B sides, N landmarks each) as their quadratic Bézier pieces.
+
+    With the knots of :func:`hermite_knots`, each landmark gap [u_i, u_{i+1}] holds two spans of
+    equal length (split at the mid knot), so the B-spline is 2(N - 1) quadratic Béziers: the
+    first from p_i through ``q_{2i} = p_i + (u_{i+1} - u_i)/4 · α_i t_i`` to the mid point
+    ``m = (q_{2i} + q_{2i+1}) / 2``, the second from m through
+    ``q_{2i+1} = p_{i+1} - (u_{i+1} - u_i)/4 · α_{i+1} t_{i+1}`` to p_{i+1} (the closed form of
+    :func:`fit_margin_report`, which equals its linear solve wherever that is regular).
+
+    Attributes
+    ----------
+    breaks : ndarray (B, 2N - 1)
+        The distinct knots 0, u_1/2, u_1, ..., 1 of each side (span k is [breaks[k], breaks[k + 1]]).
+    pieces : ndarray (B, 2N - 2, 3, 2)
+        Bézier control points of every span.
+    """
+
+    breaks: NDArray[np.float64]
+    pieces: NDArray[np.float64]
+
+    def __call__(self, u: ArrayLike) -> NDArray[np.float64]:
+        """(B, M, 2): every margin at the parameters ``u`` ((M,) for all sides or (B, M)), in [0, 1]."""
+        b = len(self.breaks)
+        uu = np.broadcast_to(np.asarray(u, dtype=np.float64), (b, np.shape(u)[-1]))
+        inner = self.breaks[:, 1:-1]
+        spans = self.pieces.shape[1]
+        span = np.sum(uu[:, :, None] >= inner[:, None, :], axis=2)          # (B, M): 0 .. 2N - 3
+        flat = span + (spans * np.arange(b))[:, None]                        # row of each sample's span
+        lo = self.breaks[:, :-1].ravel()[flat]
+        width = np.diff(self.breaks, axis=1).ravel()[flat]
+        s = np.where(width > 0.0, (uu - lo) / np.where(width > 0.0, width, 1.0), 0.0)[..., None]
+        ctrl = self.pieces.reshape(b * spans, 6)[flat]                        # (B, M, 6): three points
+        r = 1.0 - s
+        return r * r * ctrl[..., 0:2] + 2.0 * r * s * ctrl[..., 2:4] + s * s * ctrl[..., 4:6]
+
+
+def margin_pieces(points: ArrayLike, tangents: ArrayLike) -> MarginPieces:
+    """The margins of eqs 2-6 for a batch of B sides with the same number N of landmarks.
+
+    ``points`` and ``tangents`` are (B, N, 2) (tangents need not be unit); α is the total chord
+    length D of eq. 5, as in :func:`fit_margin_report` by default. Vectorised over the batch: no
+    linear solve and no scipy object per margin, so thousands of margins cost milliseconds."""
+    p = np.asarray(points, dtype=np.float64)
+    t = np.asarray(tangents, dtype=np.float64)
+    if p.ndim != 3 or p.shape[2] != 2 or p.shape[1] < 2:
+        raise ParamError("points", f"expected a (B, N, 2) array with N >= 2, got shape {p.shape}")
+    if t.shape != p.shape:
+        raise ParamError("tangents", f"expected shape {p.shape} like the points, got {t.shape}")
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(t))):
+        raise ParamError("points", "landmarks and tangents must be finite")
+    norms = np.linalg.norm(t, axis=2, keepdims=True)
+    if np.any(norms == 0.0):
+        raise ParamError("tangents", "zero tangent has no direction")
+    seg = np.linalg.norm(np.diff(p, axis=1), axis=2)                          # (B, N - 1)
+    total = seg.sum(axis=1, keepdims=True)
+    if np.any(total <= 0.0):
+        raise ParamError("points", "all landmarks coincide: the margin has zero chord length")
+    u = np.concatenate([np.zeros((len(p), 1)), np.cumsum(seg, axis=1) / total], axis=1)
+    u[:, -1] = 1.0
+    vel = t / norms * total[:, :, None]                                       # α_i t_i, α = D
+    gap = np.diff(u, axis=1)[..., None] / 4.0
+    out = p[:, :-1] + gap * vel[:, :-1]                                       # q_{2i}
+    into = p[:, 1:] - gap * vel[:, 1:]                                        # q_{2i+1}
+    mid = 0.5 * (out + into)
+    first = np.stack([p[:, :-1], out, mid], axis=2)
+    second = np.stack([mid, into, p[:, 1:]], axis=2)
+    pieces = np.stack([first, second], axis=2).reshape(len(p), -1, 3, 2)
+    breaks = np.empty((len(p), 2 * p.shape[1] - 1))
+    breaks[:, 0::2] = u
+    breaks[:, 1::2] = 0.5 * (u[:, :-1] + u[:, 1:])
+    return MarginPieces(breaks, pieces)

@@ -29,7 +29,7 @@ the left side is mirrored (x → -x) when drawn, so a symmetric leaf has ``left 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -40,10 +40,12 @@ from scipy.interpolate import BSpline
 from leafview.botany.hermite import (
     SINGULAR_CONDITION,
     MarginFit,
+    MarginPieces,
     chord_parameters,
     fit_margin,
     fit_margin_report,
     hermite_knots,
+    margin_pieces,
 )
 from leafview.core.limits import check_name
 from leafview.core.params import ParamError
@@ -58,8 +60,11 @@ __all__ = [
     "fit_margin",
     "fit_margin_report",
     "hermite_knots",
+    "margin_pieces",
     "outline",
     "outline_sides",
+    "outlines",
+    "outlines_sides",
     "side_fit",
 ]
 
@@ -354,6 +359,63 @@ def outline(leaf: LandmarkLeaf, n: int = 128, *, spacing: str = "arclength") -> 
     """
     right, left = outline_sides(leaf, n, spacing=spacing)
     return np.concatenate([right, left[-2:0:-1]])
+
+
+def _arclength_parameters(margins: MarginPieces, n: int) -> NDArray[np.float64]:
+    """(B, n) parameters evenly spaced in arc length along each margin, as :func:`_sample` finds
+    them (the chord lengths of max(8n, 512) even parameter steps, inverted by interpolation)."""
+    b = len(margins.breaks)
+    dense_u = np.linspace(0.0, 1.0, max(8 * n, 512))
+    dense = margins(dense_u)
+    s = np.concatenate([np.zeros((b, 1)), np.cumsum(np.linalg.norm(np.diff(dense, axis=1), axis=2), axis=1)], axis=1)
+    lane = 2.0 * np.arange(b)[:, None]          # row k lives in [2k, 2k + 1]: one global interpolation
+    xp = (s / np.where(s[:, -1:] > 0.0, s[:, -1:], 1.0) + lane).ravel()
+    u = np.interp((np.linspace(0.0, 1.0, n)[None, :] + lane).ravel(), xp, np.tile(dense_u, b)).reshape(b, n)
+    u[:, 0], u[:, -1] = 0.0, 1.0
+    return u
+
+
+def outlines_sides(leaves: Sequence[LandmarkLeaf], n: int = 128, *, spacing: str = "arclength"
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`outline_sides` of many leaves at once: ``(right, left)``, each (B, n, 2).
+
+    The margins of all sides with the same number of landmarks are built together in closed form
+    (:func:`~leafview.botany.hermite.margin_pieces`) and sampled together, so a batch costs a few
+    array operations per landmark count instead of a spline fit and two spline evaluations per
+    side. The result equals :func:`outline_sides` leaf by leaf to rounding."""
+    if n < 2:
+        raise ValueError(f"n must be >= 2, got {n}")
+    if spacing not in ("arclength", "parameter"):
+        raise ValueError(f"spacing must be 'arclength' or 'parameter', not {spacing!r}")
+    sides: list[SideLandmarks] = []
+    index: dict[int, int] = {}                  # id of a side -> its row (a symmetric leaf's sides are one object)
+    rows = np.empty((len(leaves), 2), dtype=np.int64)
+    for k, leaf in enumerate(leaves):
+        if not isinstance(leaf, LandmarkLeaf):
+            raise ParamError(f"leaves[{k}]", f"expected a LandmarkLeaf, got {type(leaf).__name__}")
+        for j, side in enumerate((leaf.right, leaf.left)):
+            row = index.get(id(side))
+            if row is None:
+                row = index[id(side)] = len(sides)
+                sides.append(side)
+            rows[k, j] = row
+    marks = [side.landmarks() for side in sides]
+    out = np.empty((len(sides), n, 2))
+    by_count: dict[int, list[int]] = {}
+    for i, (pts, _) in enumerate(marks):
+        by_count.setdefault(len(pts), []).append(i)
+    for group in by_count.values():
+        margins = margin_pieces(np.stack([marks[i][0] for i in group]), np.stack([marks[i][1] for i in group]))
+        u = _arclength_parameters(margins, n) if spacing == "arclength" else np.linspace(0.0, 1.0, n)
+        out[group] = margins(u)
+    out[:, 0], out[:, -1] = (0.0, 0.0), (0.0, 1.0)
+    return out[rows[:, 0]], out[rows[:, 1]] * np.array([-1.0, 1.0])
+
+
+def outlines(leaves: Sequence[LandmarkLeaf], n: int = 128, *, spacing: str = "arclength") -> NDArray[np.float64]:
+    """:func:`outline` of many leaves at once, (B, 2n - 2, 2) (see :func:`outlines_sides`)."""
+    right, left = outlines_sides(leaves, n, spacing=spacing)
+    return np.concatenate([right, left[:, -2:0:-1]], axis=1)
 
 
 def _self_crossing(poly: NDArray[np.float64]) -> int | None:

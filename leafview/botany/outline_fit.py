@@ -36,6 +36,7 @@ How (Chaurasia & Beardsley 2017, sec. 3; the fit itself is ours):
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,7 +50,7 @@ from leafview.core.params import MAX_SILHOUETTE_ROWS, LeafParams, ParamError, Sh
 from leafview.deform.surface import control_polygons, evaluate, partials
 
 __all__ = ["OutlineFit", "fit_outline", "fit_side", "split_outline", "margin", "hausdorff",
-           "outline_error", "rows_from_controls", "jacobian_min", "DEFAULT_TARGET"]
+           "outline_error", "rows_from_controls", "params_from_controls", "jacobian_min", "DEFAULT_TARGET"]
 
 DEFAULT_TARGET = OUTLINE_FIT_TARGET   # accept the smallest N whose error is below this
 _FOOT_GAP = 1e-3            # smallest spacing of the feet v̄_i (they must increase strictly)
@@ -262,37 +263,56 @@ def _polish(pts: NDArray[np.float64], t: NDArray[np.float64], inner: NDArray[np.
 
 
 # -- control points to silhouette rows ----------------------------------------------------
-def _feet(y: NDArray[np.float64]) -> NDArray[np.float64]:
-    n = len(y)
+def _feet_rows(y: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(B, N) feet v̄_i of B leaves' rows from the heights y (B, N) of their control points:
+    clamped into (0, 1) and kept increasing by at least ``_FOOT_GAP`` (a running maximum)."""
+    n = y.shape[1]
+    step = _FOOT_GAP * np.arange(n)
     lo = _FOOT_GAP * np.arange(1, n + 1)
     hi = 1.0 - _FOOT_GAP * np.arange(n, 0, -1)
-    f = np.clip(y, lo, hi)
-    for i in range(1, n):
-        f[i] = max(f[i], f[i - 1] + _FOOT_GAP)
-    return np.minimum(f, hi)
+    return np.minimum(np.maximum.accumulate(np.clip(y, lo, hi) - step, axis=1) + step, hi)
+
+
+def _feet(y: NDArray[np.float64]) -> NDArray[np.float64]:
+    return _feet_rows(np.asarray(y, np.float64)[None])[0]
+
+
+def _rows_arrays(ctrl: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Feet v̄, x̄s and tilts φ (degrees), each (B, N), of the inner control points
+    ``ctrl[:, 1:-1]`` (B, N + 2, 2) of B right sides (eq. 3 with tilt)."""
+    c = ctrl[:, 1:-1]
+    feet = _feet_rows(c[..., 1])
+    dy = c[..., 1] - feet
+    r = np.hypot(c[..., 0], dy)
+    xs = np.where(c[..., 0] >= 0.0, r, -r)
+    safe = np.where(xs != 0.0, xs, 1.0)
+    phi = np.where(np.abs(dy) > 0.0, np.degrees(np.arctan2(-dy / safe, c[..., 0] / safe)), 0.0)
+    return feet, xs, np.clip(phi, -90.0, 90.0)
 
 
 def rows_from_controls(ctrl: ArrayLike) -> tuple[tuple[tuple[float, float, float], ...], tuple[float, ...]]:
     """Silhouette rows ``(v̄, x̄s, 0)`` and tilts (degrees) placing the inner control points
     ``ctrl[1:-1]`` of the right side (x > 0) on a straight axis (eq. 3 with tilt)."""
-    c = np.asarray(ctrl, np.float64)[1:-1]
-    feet = _feet(c[:, 1])
-    dy = c[:, 1] - feet
-    r = np.hypot(c[:, 0], dy)
-    xs = np.where(c[:, 0] >= 0.0, r, -r)
-    safe = np.where(xs != 0.0, xs, 1.0)
-    phi = np.where(np.abs(dy) > 0.0, np.degrees(np.arctan2(-dy / safe, c[:, 0] / safe)), 0.0)
-    phi = np.clip(phi, -90.0, 90.0)
-    rows = tuple((float(f), float(x), 0.0) for f, x in zip(feet, xs))
-    return rows, tuple(float(p) for p in phi)
+    feet, xs, phi = (a[0].tolist() for a in _rows_arrays(np.asarray(ctrl, np.float64)[None]))
+    return tuple((f, x, 0.0) for f, x in zip(feet, xs)), tuple(phi)
+
+
+def _leaf_from_rows(feet: list[float], xs: list[float], phi: list[float], name: str) -> LeafParams:
+    n = len(feet)
+    shape = Shape(a1=(0.0, 1.0 / 3.0, 0.0), a2=(0.0, 2.0 / 3.0, 0.0), silhouette=tuple((f, x, 0.0) for f, x in zip(feet, xs)),
+                  zf=(0.0,) * n, zg=(0.0,) * n, tilt=tuple(phi))
+    return LeafParams(shape=shape, name=name)
 
 
 def _params_from_controls(ctrl: NDArray[np.float64], name: str = "") -> LeafParams:
-    rows, tilt = rows_from_controls(ctrl)
-    n = len(rows)
-    shape = Shape(a1=(0.0, 1.0 / 3.0, 0.0), a2=(0.0, 2.0 / 3.0, 0.0), silhouette=rows,
-                  zf=(0.0,) * n, zg=(0.0,) * n, tilt=tilt)
-    return LeafParams(shape=shape, name=name)
+    return params_from_controls(np.asarray(ctrl, np.float64)[None], [name])[0]
+
+
+def params_from_controls(ctrl: NDArray[np.float64], names: Sequence[str]) -> list[LeafParams]:
+    """Straight-axis flat leaves (B of them, named ``names``) whose right margin has the control
+    points ``ctrl`` (B, N + 2, 2): rows and tilts of :func:`rows_from_controls`, for the batch at once."""
+    feet, xs, phi = (a.tolist() for a in _rows_arrays(np.asarray(ctrl, np.float64)))
+    return [_leaf_from_rows(f, x, p, name) for f, x, p, name in zip(feet, xs, phi, names)]
 
 
 # -- folding --------------------------------------------------------------------------------
