@@ -21,6 +21,10 @@ NUMERIC_KEYS = (
     "thumbnail_count", "matplotlib_thumbnail_count", "scene_leaves",
     "thumbnails_per_s_single", "thumbnails_per_s_three_quarter", "record_bytes_per_leaf",
     "baked_vs_record_bytes", "ripple_overhead", "ripple_pass_ms", "ripple_pass_ms_1000",
+    # like for like against matplotlib: three-quarter, same mesh, camera and size
+    "thumbnails_per_s_three_quarter_single", "thumbnails_per_s_three_quarter_aliased",
+    "matplotlib_thumbnails_per_s_single", "matplotlib_thumbnails_per_s_aliased",
+    "thumbnail_speedup_single", "thumbnail_speedup_aliased",
 )
 
 
@@ -175,3 +179,6 @@ def test_quick_run_reports_every_key(gl):
     assert res["gl_renderer"] in text
     for label in ("thumbnail speedup", "param / baked speed", "baked / param bytes", "vs paper"):
         assert label in text
+    for key in ("thumbnail_speedup", "thumbnail_speedup_single", "thumbnail_speedup_aliased"):
+        lo, hi = res[f"{key}_range"]
+        assert 0 < lo <= res[key] <= hi   # the median of the rounds' ratios

@@ -1,5 +1,7 @@
-"""``leafview bench [core|scene|export|shapes|dataset|capture|all] [--json] [--quick]``: the benchmark tables of
-:mod:`leafview.bench`, measured in this process (also run by ``python bench/run_bench.py``).
+"""``leafview bench [core|scene|export|shapes|dataset|capture|peers|all] [--json] [--quick]``: the benchmark
+tables of :mod:`leafview.bench`, measured in this process (also run by ``python bench/run_bench.py``);
+``peers`` draws the same leaves with PyVista and pygfx as well (optional: ``leafview[peers]``), each
+in a worker process of its own, and is left out of ``all``.
 
 Each table module has ``run(quick, ctx) -> dict`` (JSON-able, with ``gl_renderer``) and
 ``format_table(res) -> str``; only the chosen tables' modules are imported. Nothing is asserted:
@@ -17,7 +19,7 @@ from typing import Any
 from leafview.cli.args import EXIT_OK, EXIT_USAGE
 from leafview.errors import GLUnavailable, one_line
 
-__all__ = ["SUITES", "add_arguments", "run"]
+__all__ = ["SUITES", "ALL", "add_arguments", "run"]
 
 # table name -> its module; "all" runs them in this order
 SUITES: dict[str, str] = {
@@ -27,7 +29,10 @@ SUITES: dict[str, str] = {
     "shapes": "leafview.bench.shapes",   # botanical leaves generated, fitted and drawn per second
     "dataset": "leafview.bench.dataset", # dataset images per second, 1 worker against 2 (local engine)
     "capture": "leafview.bench.capture", # fitting point clouds and capturing a plant from RGB-D views
+    "peers": "leafview.bench.peers",     # the same leaves drawn by PyVista/VTK and pygfx (leafview[peers])
 }
+# what "all" runs: every table but the side-by-side with other renderers (optional, minutes long)
+ALL = tuple(name for name in SUITES if name != "peers")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -40,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the suite(s) named in ``args``; exit code 2 when GL or a baseline is missing."""
-    names = list(SUITES) if args.suite == "all" else [args.suite]
+    names = list(ALL) if args.suite == "all" else [args.suite]
     if "core" in names:
         try:
             import matplotlib  # noqa: F401  (the thumbnail baseline: optional, leafview[bench])

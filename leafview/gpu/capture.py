@@ -1,9 +1,9 @@
 """Transform-feedback capture, written once: what the rendering vertex shader computes, read back.
 
-Every capture of the package (single leaves at arbitrary (u, v), the framing pass of the
-thumbnail atlas, instanced leaves, scene leaves, the exporters' meshes) records the program's two
-``vec3`` varyings (position, normal) of ``POINTS`` draws into one growing buffer, then reads it
-once. A surfaceless EGL context has no default framebuffer and draws (even with rasterizer
+Every capture of the package (single leaves at arbitrary (u, v), the thumbnail atlas, instanced
+leaves, scene leaves, the exporters' meshes) records the program's varyings of ``POINTS`` draws
+into one growing buffer, then reads it once: two ``vec3`` (position, normal) a vertex, or with
+``vertex_bytes`` more (the thumbnails also keep the drawn (u, v), and draw from the buffer itself). A surfaceless EGL context has no default framebuffer and draws (even with rasterizer
 discard) need a complete one bound, so a recording binds a 1 × 1 one and re-binds the caller's
 framebuffer when it ends.
 """
@@ -14,7 +14,7 @@ import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
-from leafview.gpu.limits import capture_bytes, check_buffer, context_alive, ensure_alive
+from leafview.gpu.limits import check_buffer, context_alive, ensure_alive
 from leafview.gpu.owner import GrowingBuffer, release_all
 
 __all__ = ["FeedbackCapture", "Recording", "VERTEX_BYTES"]
@@ -25,14 +25,18 @@ _KEEP_BYTES = 1 << 24      # larger captures use a buffer of their own, released
 
 class Recording:
     """One capture in progress (see :meth:`FeedbackCapture.recording`): :meth:`add` draws append
-    after each other, :meth:`read` returns everything recorded."""
+    after each other, :meth:`read` returns everything recorded. ``buffer`` holds the records
+    (``vertex_bytes`` each, position and normal first) until the recording closes."""
 
-    def __init__(self, capture: FeedbackCapture, vertices: int) -> None:
+    def __init__(self, capture: FeedbackCapture, vertices: int, vertex_bytes: int = VERTEX_BYTES) -> None:
         self._capture = capture
         self.capacity = int(vertices)
+        self.vertex_bytes = int(vertex_bytes)
+        if self.vertex_bytes < VERTEX_BYTES or self.vertex_bytes % 4:
+            raise ValueError(f"vertex_bytes must be a multiple of 4 of at least {VERTEX_BYTES}, got {vertex_bytes}")
         self.count = 0
         self._temporary: moderngl.Buffer | None = None
-        need = capture_bytes(self.capacity)
+        need = self.capacity * self.vertex_bytes
         check_buffer(need, "vertices", f"a capture of {self.capacity:,} vertices")  # before allocating
         ensure_alive(capture.ctx, "a capture")
         if need > _KEEP_BYTES:
@@ -49,14 +53,18 @@ class Recording:
         if self.count + n > self.capacity:
             raise ValueError(f"capture of {self.capacity} vertices is full ({self.count} + {n})")
         vao.transform(self.buffer, mode=moderngl.POINTS, vertices=int(vertices), instances=int(instances),
-                      buffer_offset=self.count * VERTEX_BYTES)
+                      buffer_offset=self.count * self.vertex_bytes)
         self.count += n
+
+    def records(self) -> NDArray[np.float32]:
+        """Everything recorded so far, one row of ``vertex_bytes / 4`` floats a vertex (read-only)."""
+        raw = self.buffer.read(size=self.count * self.vertex_bytes) if self.count else b""
+        return np.frombuffer(raw, np.float32).reshape(self.count, self.vertex_bytes // 4)
 
     def read(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         """Positions and normals recorded so far: two (count, 3) float32 arrays."""
-        raw = self.buffer.read(size=self.count * VERTEX_BYTES) if self.count else b""
-        data = np.frombuffer(raw, np.float32).reshape(self.count, 6)
-        return data[:, :3].copy(), data[:, 3:].copy()
+        data = self.records()
+        return data[:, :3].copy(), data[:, 3:6].copy()
 
     def close(self) -> None:
         release_all(self._temporary)
@@ -87,9 +95,10 @@ class FeedbackCapture:
             self._fbo = self.ctx.framebuffer([self._color])
         return self._fbo
 
-    def recording(self, vertices: int) -> Recording:
-        """Start a capture of up to ``vertices`` points; use as a ``with`` block."""
-        return Recording(self, vertices)
+    def recording(self, vertices: int, vertex_bytes: int = VERTEX_BYTES) -> Recording:
+        """Start a capture of up to ``vertices`` points of ``vertex_bytes`` each (the program's
+        varyings, position and normal first); use as a ``with`` block."""
+        return Recording(self, vertices, vertex_bytes)
 
     def points(self, vao: moderngl.VertexArray, vertices: int, instances: int = 1
                ) -> tuple[NDArray[np.float32], NDArray[np.float32]]:

@@ -46,7 +46,7 @@ from leafview.gpu.limits import (
 )
 from leafview.gpu.owner import GLObjects, GrowingBuffer
 from leafview.gpu.prepare import LeafPrepare
-from leafview.gpu.resources import GpuResources, JitterTable
+from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, JitterTable
 from leafview.gpu.targets import unpremultiply
 from leafview.scene.camera import VIEWS, Camera, frame_view
 
@@ -54,6 +54,14 @@ __all__ = ["LeafRenderer", "DEFAULT_GRID", "BATCH", "Lighting", "fill_frame"]
 
 BATCH = 64            # leaves per atlas in render_many
 _MAX_ATLAS = 4096     # atlas side limit in pixels (well inside GL_MAX_RENDERBUFFER_SIZE)
+
+# what a thumbnail captures of each vertex and then draws from: world position, world normal
+# (as leaf.vert computes them) and the drawn (u, v) that leaf.frag's midrib reads
+DRAW_VARYINGS = (*WORLD_VARYINGS, "v_uv")
+DRAW_VERTEX_FORMAT = "3f 3f 2f"
+DRAW_VERTEX_BYTES = 32
+_COMMAND = np.dtype([("count", "<u4"), ("instances", "<u4"), ("first_index", "<u4"), ("base_vertex", "<i4"),
+                     ("base_instance", "<u4")])   # DrawElementsIndirectCommand
 
 
 class LeafRenderer:
@@ -93,6 +101,8 @@ class LeafRenderer:
             self.frame = self._objects.own(FrameUniforms(self.ctx))
             self._batch_leaf = self._objects.own(GrowingBuffer(self.ctx))
             self._batch_frame = self._objects.own(GrowingBuffer(self.ctx))
+            self._batch_colour = self._objects.own(GrowingBuffer(self.ctx))
+            self._batch_commands = self._objects.own(GrowingBuffer(self.ctx))
         except BaseException:
             self.release()
             raise
@@ -198,9 +208,10 @@ class LeafRenderer:
                     camera: Camera | None = None) -> list[NDArray[Any]]:
         """Render several leaves, each framed on its own, in few GPU round trips.
 
-        The vertices of every leaf are first captured from the vertex shader in one pass (so the
-        framing uses exactly the drawn vertices), then all leaves are drawn into tiles of one
-        atlas, resolved and read back once per chunk of up to :data:`BATCH` leaves.
+        The vertex shader runs once per grid vertex: every leaf's world-space vertices are
+        captured (transform feedback), each camera is framed on exactly those vertices, and the
+        tiles of one atlas are drawn from the captured buffer (the baked-mesh program, the same
+        fragment shader), resolved and read back once per chunk of up to :data:`BATCH` leaves.
         ``camera`` (from :func:`leafview.scene.camera.frame_view`) replaces the per-leaf framing with one
         camera for all (frame sequences that must not jump in scale); ``view`` still names it.
         """
@@ -217,7 +228,7 @@ class LeafRenderer:
         check_image(self.limits, (w, h), samples, linear=linear)
         cols = max(1, min(BATCH, _MAX_ATLAS // w))
         rows = max(1, _MAX_ATLAS // h)
-        chunk = max(1, min(BATCH, cols * rows, MAX_RESOURCE_BYTES // capture_bytes(nu * nv)))
+        chunk = max(1, min(BATCH, cols * rows, MAX_RESOURCE_BYTES // (nu * nv * DRAW_VERTEX_BYTES)))
         first = min(len(leaves), chunk)
         if first:
             c = min(first, cols)
@@ -234,6 +245,10 @@ class LeafRenderer:
                       bg: tuple[float, float, float, float],
                       grid: tuple[int, int], samples: int, linear: bool, max_cols: int,
                       camera: Camera | None = None) -> list[NDArray[Any]]:
+        """One vertex pass: every leaf's grid is evaluated once by ``leaf.vert`` and captured in
+        world space (position, normal, drawn (u, v)), each camera is framed on exactly those
+        vertices, and the tiles are drawn from the captured buffer itself with the baked-mesh
+        program (the same ``leaf.frag``), one indirect draw a leaf; one readback."""
         n = len(leaves)
         records, tables = pack_leaves(leaves)
         self.jitter.upload(tables)
@@ -243,41 +258,54 @@ class LeafRenderer:
         leaf_rows, leaf_stride = self._write_records(self._batch_leaf, records)
         for i in range(n):  # rows sit at the uniform-offset alignment: one small dispatch each
             self.prepare.run(leaf_rows, 1, offset=i * leaf_stride)
-
         # the shader permutation without the features no leaf of this chunk uses
-        program = self.leaf_program(feature_defines(records))
+        program = self.resources.leaf_program(feature_defines(records), varyings=DRAW_VARYINGS)
         geometry = self.resources.grid(*grid)
-
-        # 1. capture every leaf's grid from the vertex shader, frame each camera on it
         nverts = geometry.vertices
-        positions = self._capture_rows(leaf_rows, leaf_stride, n, geometry.points(program), nverts)
-        frames = np.zeros(n, dtype=FRAME_BLOCK.dtype)
-        for i, leaf in enumerate(leaves):
-            if camera is not None:
-                fill_frame(frames[i], camera, srgb=not linear)
-                continue
-            m = leaf.transform.matrix()
-            world = positions[i * nverts:(i + 1) * nverts].astype(np.float64) @ m[:3, :3].T + m[:3, 3]
-            fill_frame(frames[i], frame_view(view, world, (w, h)), srgb=not linear)
-        frame_rows, frame_stride = self._write_records(self._batch_frame, frames)
-
-        # 2. draw each leaf into its tile
-        cols = min(n, max_cols)
-        tiles_y = (n + cols - 1) // cols
-        target = self.resources.target((cols * w, tiles_y * h), samples, linear=linear)
-        target.use()
-        self.ctx.scissor = None
-        target.clear(bg)
-        self.ctx.enable_only(moderngl.DEPTH_TEST)
+        points = geometry.points(program)
         self._bind_tables()
-        vao = geometry.vao(program)
-        for i in range(n):
-            x, y = (i % cols) * w, (i // cols) * h
-            self.ctx.viewport = self.ctx.scissor = (x, y, w, h)
-            leaf_rows.bind_to_uniform_block(LEAF_BINDING, offset=i * leaf_stride, size=LEAF_BLOCK.nbytes)
-            frame_rows.bind_to_uniform_block(FRAME_BINDING, offset=i * frame_stride, size=FRAME_BLOCK.nbytes)
-            vao.render(moderngl.TRIANGLES)
-        self.ctx.scissor = None
+        self.frame.bind()   # the capture computes gl_Position too (discarded)
+        with self.resources.capture.recording(n * nverts, DRAW_VERTEX_BYTES) as rec:
+            # 1. the only vertex-shader pass over the leaves: capture, frame each camera on it
+            for i in range(n):
+                leaf_rows.bind_to_uniform_block(LEAF_BINDING, offset=i * leaf_stride, size=LEAF_BLOCK.nbytes)
+                rec.add(points, nverts)
+            frames = np.zeros(n, dtype=FRAME_BLOCK.dtype)
+            if camera is not None:
+                fill_frame(frames[0], camera, srgb=not linear)
+                frames[1:] = frames[0]
+            else:
+                world = rec.records()[:, :3].reshape(n, nverts, 3)
+                for i in range(n):
+                    fill_frame(frames[i], frame_view(view, world[i].astype(np.float64), (w, h)),
+                               srgb=not linear)
+            frame_rows, frame_stride = self._write_records(self._batch_frame, frames)
+            colours = self._batch_colour.write(_leaf_colours(records))
+            commands = self._batch_commands.write(_draw_commands(n, geometry.triangles * 3, nverts))
+
+            # 2. draw each leaf into its tile from the captured vertices
+            cols = min(n, max_cols)
+            tiles_y = (n + cols - 1) // cols
+            target = self.resources.target((cols * w, tiles_y * h), samples, linear=linear)
+            target.use()
+            self.ctx.scissor = None
+            target.clear(bg)
+            self.ctx.enable_only(moderngl.DEPTH_TEST)
+            vao = self.ctx.vertex_array(
+                self.resources.baked_program(),
+                [(rec.buffer, DRAW_VERTEX_FORMAT, "in_position", "in_normal", "in_uv"),
+                 (colours, "4f 4f/i", "in_front", "in_back")],
+                index_buffer=geometry.ibo, index_element_size=4)
+            try:
+                for i in range(n):
+                    x, y = (i % cols) * w, (i // cols) * h
+                    self.ctx.viewport = self.ctx.scissor = (x, y, w, h)
+                    frame_rows.bind_to_uniform_block(FRAME_BINDING, offset=i * frame_stride,
+                                                     size=FRAME_BLOCK.nbytes)
+                    vao.render_indirect(commands, moderngl.TRIANGLES, count=1, first=i)
+            finally:
+                vao.release()
+                self.ctx.scissor = None
 
         # 3. one readback (resolving the samples), split into tiles
         atlas = target.read(copy=False)
@@ -289,19 +317,6 @@ class LeafRenderer:
                 img = unpremultiply(img)
             images.append(np.ascontiguousarray(img))
         return images
-
-    def _capture_rows(self, rows: moderngl.Buffer, stride: int, n: int, points: moderngl.VertexArray,
-                      nverts: int) -> NDArray[np.float32]:
-        """Leaf-space positions of the grid of each of ``n`` leaves stored ``stride`` bytes apart
-        in ``rows`` (one capture, one readback)."""
-        self._bind_tables()
-        self.frame.bind()
-        with self.resources.capture.recording(n * nverts) as rec:
-            for i in range(n):
-                rows.bind_to_uniform_block(LEAF_BINDING, offset=i * stride, size=LEAF_BLOCK.nbytes)
-                rec.add(points, nverts)
-            positions, _ = rec.read()
-        return positions
 
     def _write_records(self, buf: GrowingBuffer, records: np.ndarray) -> tuple[moderngl.Buffer, int]:
         """Write ``records`` one per aligned row into ``buf`` (grown when too small); returns the
@@ -334,6 +349,21 @@ class LeafRenderer:
         finally:
             vao.release()
             vbo.release()
+
+
+def _leaf_colours(records: NDArray[Any]) -> NDArray[np.float32]:
+    """Per-leaf attributes of the thumbnail draw: front (rgb, translucency) and back colours."""
+    return np.ascontiguousarray(np.concatenate([records["front"], records["back"]], axis=1), np.float32)
+
+
+def _draw_commands(n: int, indices: int, vertices: int) -> NDArray[Any]:
+    """One indexed draw of the grid per leaf: leaf ``i`` reads captured vertices from
+    ``i * vertices`` and its colours from instance row ``i``."""
+    cmd = np.zeros(n, _COMMAND)
+    cmd["count"], cmd["instances"] = indices, 1
+    cmd["base_vertex"] = np.arange(n) * vertices
+    cmd["base_instance"] = np.arange(n)
+    return cmd
 
 
 def _check_size(size: Any) -> tuple[int, int]:

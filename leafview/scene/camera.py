@@ -227,24 +227,29 @@ def _orbit(points: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.
     sphere for long, narrow leaves), aimed at the middle of the projected extent."""
     az, el = np.radians(az_deg), np.radians(el_deg)
     back = np.array([np.sin(az) * np.cos(el), -np.cos(az) * np.cos(el), np.sin(el)])  # towards camera
-    right = np.cross(-back, [0.0, 0.0, 1.0])
+    right = np.array([-back[1], back[0], 0.0])   # -back × z
     right /= np.linalg.norm(right)
     up = np.cross(right, -back)
     tan_y = np.tan(np.radians(FOV_DEG) / 2) * ORBIT_FILL
     tan_x = tan_y * w / h
+    # the points in camera axes once; the aim moves only along right and up, so each step
+    # shifts x and y by a constant and leaves z as it is
     center = (lo + hi) / 2
+    cam = (points - center) @ np.stack([right, up, back]).T
+    x, y, z = cam[:, 0], cam[:, 1], cam[:, 2]
+    shift_x = shift_y = 0.0
     for _ in range(3):  # distance for the current aim, then re-aim at the projected middle
-        rel = points - center
-        x, y, z = rel @ right, rel @ up, rel @ back
-        dist = max(float(np.max(z + np.maximum(np.abs(x) / tan_x, np.abs(y) / tan_y))), 1e-6)
-        sx, sy = x / (dist - z), y / (dist - z)
-        center = center + right * (dist * (sx.max() + sx.min()) / 2) + up * (dist * (sy.max() + sy.min()) / 2)
-    rel = points - center
-    x, y, z = rel @ right, rel @ up, rel @ back
-    dist = max(float(np.max(z + np.maximum(np.abs(x) / tan_x, np.abs(y) / tan_y))), 1e-6)
+        xs, ys = x - shift_x, y - shift_y
+        dist = max(float(np.max(z + np.maximum(np.abs(xs) / tan_x, np.abs(ys) / tan_y))), 1e-6)
+        sx, sy = xs / (dist - z), ys / (dist - z)
+        shift_x += dist * (sx.max() + sx.min()) / 2
+        shift_y += dist * (sy.max() + sy.min()) / 2
+    xs, ys = x - shift_x, y - shift_y
+    dist = max(float(np.max(z + np.maximum(np.abs(xs) / tan_x, np.abs(ys) / tan_y))), 1e-6)
+    center = center + right * shift_x + up * shift_y
     eye = center + dist * back
-    depth = np.abs(rel @ back)
-    near, far = max(dist - depth.max() * 1.5 - 1e-3, dist * 1e-3), dist + depth.max() * 1.5 + 1e-3
+    zmax = float(np.abs(z).max())   # depth along the view axis (the aim moved across it only)
+    near, far = max(dist - zmax * 1.5 - 1e-3, dist * 1e-3), dist + zmax * 1.5 + 1e-3
     return look_at(eye, center, w / h, near, far)
 
 
