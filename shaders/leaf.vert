@@ -1,22 +1,34 @@
 #version 450
 // Leaf vertex shader: turns each (u, v) of a fixed grid into the leaf's position and normal
-// from the Leaf uniform block (or, with LEAF_INSTANCED / LEAF_INDIRECT, one row of the Leaves
-// storage buffer).
+// from the leaf's record (leafview/gpu/layout.py):
+// * default: one LeafData in the Leaf uniform block (single leaves);
+// * LEAF_INSTANCED: the LeafVertex members of row gl_InstanceID as per-instance vertex attributes,
+//   read in place from the buffer of LeafData rows (InstancedLeaves);
+// * LEAF_INDIRECT: the same attributes from the compact LeafVertex records of the visible leaves
+//   that scene_compact.comp writes (scenes; each draw command's baseInstance selects its level's
+//   records, the record's leaf_vertex_row names the row).
+// In both, the members only ripples, bends and extended silhouettes need are texels of the row in
+// the leaf_rows texture (LEAF_ROW_TEXTURE), fetched in those branches only. llvmpipe runs
+// storage-buffer reads as per-vertex gathers; an instanced attribute costs a fraction of that and
+// a texel fetch about half (docs/benchmarks.md).
 // The same program is used with transform feedback (v_object, v_object_normal) by
 // leafview.gpu.evaluate, so what is tested is what is drawn.
 #include "generated/leaf_block.glsl"
 #include "generated/frame_block.glsl"
+#if defined(LEAF_INSTANCED) || defined(LEAF_INDIRECT)
+#include "generated/leaf_vertex.glsl"
+#include "generated/leaf_attributes.glsl"
+LeafVertex leaf_vertex;   // this vertex's leaf, made of the attributes first thing in main()
+#define LEAF leaf_vertex
 #if defined(LEAF_INDIRECT)
-// scenes: the culling pass lists visible leaves per level of detail; each draw command's
-// baseInstance points at its level's list, read as a per-instance attribute
-layout(std430, binding = LEAVES_BINDING) readonly buffer Leaves { LeafData leaves[]; };
-in uint in_leaf;
-#define LEAF leaves[in_leaf]
-#elif defined(LEAF_INSTANCED)
-layout(std430, binding = LEAVES_BINDING) readonly buffer Leaves { LeafData leaves[]; };
-#define LEAF leaves[gl_InstanceID]
+#define LEAF_ROW_INDEX uint(leaf_vertex_row(leaf_vertex))
+#else
+#define LEAF_ROW_INDEX uint(gl_InstanceID)
+#endif
+#define LEAF_ROW_TEXTURE
 #else
 #define LEAF leaf
+#define LEAF_ROW leaf
 #endif
 #include "leaf_eval.glsl"
 
@@ -37,7 +49,7 @@ flat out vec3 v_back;
 flat out uint v_leaf;
 #if defined(LEAF_INDIRECT)
 #include "generated/aov_vertex.glsl"
-#define LEAF_INDEX (leaf_offset + in_leaf)   // in_leaf counts within the batch
+#define LEAF_INDEX (leaf_offset + LEAF_ROW_INDEX)   // the row counts within the batch
 #elif defined(LEAF_INSTANCED)
 #define LEAF_INDEX uint(gl_InstanceID)
 #else
@@ -46,6 +58,9 @@ flat out uint v_leaf;
 #endif
 
 void main() {
+#if defined(LEAF_INSTANCED) || defined(LEAF_INDIRECT)
+    leaf_vertex = leaf_vertex_attributes();
+#endif
     // one half only (shape.half = ±1, e.g. each side of an asymmetric leaf): the grid's u in
     // [-1, 1] spreads over [0, 1] or [-1, 0], u' = (u + half) / 2 (leafview.deform.surface.drawn_uv)
     vec2 uv = in_uv;

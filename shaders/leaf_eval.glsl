@@ -4,15 +4,23 @@
 // LEAF_NO_HALF in leaf.vert) compile the feature out when no leaf of a draw uses it
 // (leafview.gpu.layout.feature_defines); the results are identical for the leaves they are used
 // with.
-// The including shader defines LEAF as the LeafData to read (the Leaf uniform block or one row of
-// the Leaves storage buffer). Fields are read through it where they are used, never copied as a
-// whole struct: a copy makes the compiler load every field (and on llvmpipe each storage-buffer
-// load is a per-vertex gather). Conventions and the numpy reference:
+// The including shader defines LEAF as the record every vertex reads (the Leaf uniform block, a
+// LeafData row, or the LeafVertex made of instanced vertex attributes: only the LeafVertex members
+// and the branch code are read through it). The members of the optional branches (ripples,
+// bending, extended silhouettes) are read through the generated ROW_* macros: from the LeafData
+// LEAF_ROW (default LEAF), or, with LEAF_ROW_TEXTURE, from row LEAF_ROW_INDEX of the leaf_rows
+// texture. Fields are read where they are used, never copied as a whole struct: a copy makes the
+// compiler load every field (and on llvmpipe each storage-buffer load is a per-vertex gather).
+// Conventions and the numpy reference:
 // leafview/deform/surface.py (a test compares positions read back from this code with it).
 #ifndef LEAFVIEW_LEAF_EVAL_GLSL
 #define LEAFVIEW_LEAF_EVAL_GLSL
 #include "bezier.glsl"
 #include "fbm.glsl"
+#ifndef LEAF_ROW
+#define LEAF_ROW LEAF
+#endif
+#include "generated/leaf_row.glsl"
 
 // the ripple signals (fBm, one row of RIPPLE_SAMPLES per (seed, beta)), written by fbm.comp
 layout(std430, binding = SIGNALS_BINDING) readonly buffer Signals { float signals[]; };
@@ -37,13 +45,14 @@ vec2 tip_taper(float v) {
 // + theta)], c(s) = s^2 (3 - s) / 2 the small-deflection shape of a tip-loaded cantilever (the
 // secondary vein from the midrib). numpy reference: leafview/deform/surface.py, _add_ripple.
 void add_ripple(float sigma, float s, float v, inout LeafEval e) {
-    vec4 rp = sigma > 0.0 ? LEAF.ripple_l : LEAF.ripple_r;  // P, lambda, k, theta
-    int base = leaf_signal_row(LEAF) * RIPPLE_SAMPLES;
-    float t = rp.z * leaf_veins(LEAF) * v + rp.w;
+    vec4 rp = sigma > 0.0 ? ROW_ripple_l : ROW_ripple_r;  // P, lambda, k, theta
+    int base = ROW_leaf_signal_row * RIPPLE_SAMPLES;
+    float veins = ROW_leaf_veins;
+    float t = rp.z * veins * v + rp.w;
     vec2 n;
     FBM_SAMPLE_PERIODIC(signals, base, RIPPLE_SAMPLES, t, n);
     float r = rp.x * (rp.y + (1.0 - rp.y) * n.x);
-    float dr = rp.x * (1.0 - rp.y) * n.y * rp.z * leaf_veins(LEAF);
+    float dr = rp.x * (1.0 - rp.y) * n.y * rp.z * veins;
     vec2 tau = tip_taper(v);
     float c = 0.5 * s * s * (3.0 - s);
     float dc = 3.0 * s - 1.5 * s * s;
@@ -64,10 +73,13 @@ mat3 axis_rotation(vec3 a, float t) {
     return c * mat3(1.0) + s * cross_matrix(a) + (1.0 - c) * outerProduct(a, a);
 }
 
-vec4 bend_sample(int i) {
-    if (i < 0) return 2.0 * LEAF.bend[0] - LEAF.bend[1];
-    if (i >= BEND_SAMPLES) return 2.0 * LEAF.bend[BEND_SAMPLES - 1] - LEAF.bend[BEND_SAMPLES - 2];
-    return LEAF.bend[i];
+// the four bend samples i - 1 .. i + 2 around the interval i (0 <= i <= BEND_SAMPLES - 2); the ones
+// past either end are extrapolated linearly from the two end samples (four reads)
+void bend_samples(int i, out vec4 p0, out vec4 p1, out vec4 p2, out vec4 p3) {
+    p1 = ROW_bend(i);
+    p2 = ROW_bend(i + 1);
+    p0 = i > 0 ? ROW_bend(max(i - 1, 0)) : 2.0 * p1 - p2;
+    p3 = i + 2 < BEND_SAMPLES ? ROW_bend(min(i + 2, BEND_SAMPLES - 1)) : 2.0 * p2 - p1;
 }
 
 // Midrib bend and twist (Geng, Hu & Zhang 2014, secs 4, 5.2.2): p' = A + Delta(v) + R(v) (p - A), R = R_N(Phi(v))
@@ -77,15 +89,16 @@ void apply_bend(float v, vec3 Av, vec3 dAv, inout LeafEval e) {
     float t = clamp(v, 0.0, 1.0) * float(BEND_SAMPLES - 1);
     int i = min(int(floor(t)), BEND_SAMPLES - 2);
     float x = t - float(i);
-    vec4 p0 = bend_sample(i - 1), p1 = bend_sample(i), p2 = bend_sample(i + 1), p3 = bend_sample(i + 2);
+    vec4 p0, p1, p2, p3;
+    bend_samples(i, p0, p1, p2, p3);
     vec4 c1 = 0.5 * (p2 - p0);
     vec4 c2 = p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3;
     vec4 c3 = 0.5 * (p3 - p0) + 1.5 * (p1 - p2);
     vec4 val = ((c3 * x + c2) * x + c1) * x + p1;                        // Delta.xyz, Phi
     vec4 slope = ((3.0 * c3 * x + 2.0 * c2) * x + c1) * float(BEND_SAMPLES - 1);
 
-    vec3 axis = LEAF.bend_axis.xyz;
-    float alpha = leaf_twist(LEAF);
+    vec3 axis = ROW_bend_axis.xyz;
+    float alpha = ROW_leaf_twist;
     const vec3 Y = vec3(0.0, 1.0, 0.0);
     mat3 rn = axis_rotation(axis, val.w);
     mat3 ry = axis_rotation(Y, alpha * v);
@@ -129,9 +142,15 @@ void ext_silhouette(int rows, float v, out vec3 Pv, out vec3 Qv, out vec3 dPv, o
         float dw = float(n) * (float(cm) * pv[i - 1] * pt[n - i] - float(cn) * pv[i] * pt[n - 1 - i]);
         cm = cn;
         int k = i - 1;  // row index
-        vec4 ka = k < 3 ? LEAF.axis[min(k, 2)] : LEAF.sil_axis[max(k - 3, 0)];
-        vec4 kh = k < 3 ? LEAF.heights[min(k, 2)] : LEAF.sil_heights[max(k - 3, 0)];
-        vec2 T = leaf_sil_tilt(LEAF, k);
+        vec4 ka, kh;
+        if (k < 3) {
+            ka = LEAF.axis[min(k, 2)];
+            kh = LEAF.heights[min(k, 2)];
+        } else {
+            ka = ROW_sil_axis(max(k - 3, 0));
+            kh = ROW_sil_heights(max(k - 3, 0));
+        }
+        vec2 T = ROW_leaf_sil_tilt(k);
         vec3 Q = vec3(ka.w, kh.w, 0.0);
         Pv += w * ka.xyz;
         dPv += dw * ka.xyz;
@@ -172,7 +191,7 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
 #ifdef LEAF_NO_EXTENDED
     const int rows = 0;           // no leaf of this draw is extended: the branches below fold away
 #else
-    int rows = leaf_rows(LEAF);  // 0: the paper's quartic; N: an extended silhouette of N rows
+    int rows = leaf_branch_rows(LEAF);  // 0: the paper's quartic; N: an extended silhouette of N rows
 #endif
     if (rows == 0) {
         // quartic weights at v for the inner points (the base is the origin, so it drops out) and
@@ -252,12 +271,12 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
     }
 #endif
 #ifndef LEAF_NO_RIPPLE
-    if (leaf_ripple_on(LEAF)) {
+    if (leaf_has_ripple(LEAF)) {
         add_ripple(sigma, s, v, e);
     }
 #endif
 #ifndef LEAF_NO_BEND
-    if (leaf_bend_on(LEAF)) {
+    if (leaf_has_bend(LEAF)) {
         apply_bend(v, Av, dAv, e);
     }
 #endif

@@ -9,7 +9,17 @@ import pytest
 import leafview
 from leafview.core.params import Jitter
 from leafview.deform.surface import grid_uv
-from leafview.gpu.layout import FRAME_BLOCK, LEAF_BINDING, LEAF_BLOCK, LEAVES_BINDING, READBACK_BINDING, pack_leaf
+from leafview.gpu.layout import (
+    FRAME_BLOCK,
+    LEAF_BINDING,
+    LEAF_BLOCK,
+    LEAVES_BINDING,
+    READBACK_BINDING,
+    branch_code,
+    pack_leaf,
+    read_slot,
+    without_derived,
+)
 from tests.conftest import random_params, run_prepare
 
 pytestmark = pytest.mark.gl
@@ -152,8 +162,10 @@ def test_prepare_pass_matches_reference(gl):
         s = leaf.shape
         np.testing.assert_array_equal(rec["heights"][:, :3], np.float32(np.c_[s.zf, s.zg, s.zs]))
     rest = [name for name, _, _ in LEAF_BLOCK.members if name not in ("axis", "heights")]
-    for name in rest:  # and touches nothing else
-        np.testing.assert_array_equal(out[name], records[name])
+    host = without_derived(out)
+    for name in rest:  # and touches nothing else but the derived slots
+        np.testing.assert_array_equal(host[name], records[name])
+    np.testing.assert_array_equal(read_slot(out, "leaf_branches"), branch_code(records))
 
 
 def test_pack_leaf_fields():

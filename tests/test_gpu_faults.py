@@ -115,7 +115,7 @@ def test_too_many_instances_refused(gl, monkeypatch):
 def test_ten_million_leaves_refused_with_the_estimate_and_the_machine(monkeypatch):
     monkeypatch.setattr(limits, "physical_memory", lambda: 24 * 2**30)
     check_scene(1_000_000)
-    with pytest.raises(GpuLimitError, match=r"scene of 10,000,000 leaves needs about 14\.3 GiB.*24\.0 GiB") as info:
+    with pytest.raises(GpuLimitError, match=r"scene of 10,000,000 leaves needs about 24\.2 GiB.*24\.0 GiB") as info:
         check_scene(10_000_000)
     assert info.value.path == "scene.leaves"
 
@@ -128,7 +128,7 @@ def test_cli_refuses_a_scene_that_does_not_fit_memory(tmp_path, monkeypatch, cap
     code = main(["scene", "--leaves", "10000000", "-o", str(out), "--quiet"])
     assert code == 2
     err = capsys.readouterr().err
-    assert "10,000,000 leaves" in err and "14." in err and "24.0 GiB" in err, err
+    assert "10,000,000 leaves" in err and "24.3 GiB" in err and "24.0 GiB" in err, err
     assert not out.exists()
 
 

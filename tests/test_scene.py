@@ -10,7 +10,7 @@ import pytest
 
 from leafview.cli import main
 from leafview.core.params import LeafParams, ParamError
-from leafview.gpu.layout import LEAF_BLOCK, pack_leaf
+from leafview.gpu.layout import LEAF_BLOCK, branch_code, pack_leaf, read_slot, without_derived
 from leafview.scene.spec import SceneSpec, build_scene, evaluate_leaf, load_scene, save_scene
 from tests.conftest import assert_matches_reference
 
@@ -146,9 +146,13 @@ def test_rows_on_the_gpu_round_trip(drawn, small):
 
     back = np.frombuffer(drawn.batches[0].rows.read(), LEAF_BLOCK.dtype)
     rows = pack_scene(small)
+    host = without_derived(back)
     for name, _, _ in LEAF_BLOCK.members:
         if name not in LEAF_BLOCK.derived:
-            assert np.array_equal(back[name], rows[name]), name
+            assert np.array_equal(host[name], rows[name]), name
+    # the prepare pass wrote each row's branch code (maize ripples and bends, the others do not)
+    assert np.array_equal(read_slot(back, "leaf_branches"), branch_code(rows))
+    assert len(set(read_slot(back, "leaf_branches").tolist())) > 1
     # the prepare pass filled the derived axis points of every row
     for i in (3, 77):
         pts, _ = axis_frames(small.leaf(i))

@@ -3,7 +3,7 @@ core and scene).
 
 ``n`` scattered leaves (grid 9×15 = 224 triangles each) drawn into a 512×512 framebuffer with
 depth test: the parametric path (:class:`~leafview.gpu.instanced.InstancedLeaves`, one instanced
-draw from the leaf record) against the same triangles pre-baked
+draw from the leaf record, fed as per-instance vertex attributes) against the same triangles pre-baked
 (:class:`~leafview.gpu.instanced.BakedLeaves`, one indexed draw); and the bytes per leaf of a
 baked 32×64 mesh against the record.
 """

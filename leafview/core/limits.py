@@ -36,7 +36,9 @@ MAX_MORPH_FRAMES = 1000         # frames of a morph sequence
 MAX_VIEW_FRAMES = 1_000_000     # --frames of a scripted viewer run
 MAX_IMAGE_SIDE = 8192           # pixels per side of an image or window
 MAX_GRID = 1025                 # grid samples across or along a blade
-BYTES_PER_LEAF = 1536           # host memory per scene leaf: arrays, placement, GPU records (as gpu.limits)
+BYTES_PER_LEAF = 2600           # host memory per scene leaf: arrays, placement, GPU records (816 B), the
+#                                 visible records (240 B) and the branch texture (816 B, rippled, bent
+#                                 or extended species) (as gpu.limits)
 BYTES_PER_PLANT = 13_000        # host memory per plant: its stem mesh and placement
 BYTES_PER_LEAF_PARAMS = 4000    # host memory per leaf read from a leaf set (LeafParams objects)
 MEMORY_FRACTION = 0.5           # a scene may plan to use this share of the physical memory

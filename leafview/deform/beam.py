@@ -31,12 +31,12 @@ from numpy.typing import ArrayLike, NDArray
 from leafview.core.blade import blade_partials
 from leafview.core.params import Bending, LeafParams, ParamError, Ripple, Shape, Transform, Vec3
 
-__all__ = ["solve_bending", "residual", "bend_profile", "BendProfile", "BEND_SAMPLES", "rotation",
-           "sample_clamped"]
+__all__ = ["solve_bending", "residual", "bend_profile", "BendProfile", "BEND_SAMPLES", "MIDRIB_SEGMENTS",
+           "PETIOLE_SEGMENTS", "rotation", "sample_clamped"]
 
 BEND_SAMPLES = 8
-_MIDRIB_SEGMENTS = 48
-_PETIOLE_SEGMENTS = 8
+MIDRIB_SEGMENTS = 48
+PETIOLE_SEGMENTS = 8
 
 
 def residual(phi: ArrayLike, ds: ArrayLike, theta0: ArrayLike, load: ArrayLike, EI: ArrayLike) -> NDArray[np.float64]:
@@ -105,7 +105,7 @@ class BendProfile:
 
 def sample_clamped(values: ArrayLike, v: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Catmull-Rom through K uniform samples on [0, 1] (ends extrapolated linearly): value and
-    d/dv at ``v``. ``values`` is (K,) or (K, d). Mirrors ``bend_sample`` in leaf_eval.glsl."""
+    d/dv at ``v``. ``values`` is (K,) or (K, d). Mirrors ``bend_samples`` in leaf_eval.glsl."""
     vals = np.asarray(values, np.float64)
     k = vals.shape[0]
     ext = np.concatenate([2 * vals[:1] - vals[1:2], vals, 2 * vals[-1:] - vals[-2:-1]])
@@ -155,7 +155,7 @@ def _bend_profile_cached(shape: Shape, bending: Bending, rotation_deg: Vec3, sca
     # the straight chain: petiole from (0, -Lp, 0) to the base, then the midrib A(v) of the
     # unbent, unrippled blade
     params = params.replace(bending=Bending(), ripple=Ripple())
-    v = np.linspace(0.0, 1.0, _MIDRIB_SEGMENTS + 1)
+    v = np.linspace(0.0, 1.0, MIDRIB_SEGMENTS + 1)
     joints = _blade_points(params, np.zeros_like(v), v)
     seg = np.diff(joints, axis=0)
     vm = 0.5 * (v[1:] + v[:-1])
@@ -174,7 +174,7 @@ def _bend_profile_cached(shape: Shape, bending: Bending, rotation_deg: Vec3, sca
     forces = b.load * width * ds / ds.mean()
     ei = np.full(len(ds), b.stiffness)
     dirs = seg / ds[:, None]
-    n_pet = _PETIOLE_SEGMENTS if b.petiole_length > 0 else 0
+    n_pet = PETIOLE_SEGMENTS if b.petiole_length > 0 else 0
     if n_pet:
         ds = np.r_[np.full(n_pet, b.petiole_length / n_pet), ds]
         forces = np.r_[np.zeros(n_pet), forces]

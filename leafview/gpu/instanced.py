@@ -2,8 +2,11 @@
 
 :class:`InstancedLeaves` uploads one :data:`~leafview.gpu.layout.LEAF_BLOCK` record per leaf to a
 shader storage buffer (``LEAVES_BINDING``) and draws a single (nu × nv) grid ``N`` times with one
-instanced call; ``leaf.vert`` (built with ``LEAF_INSTANCED``) evaluates L_Ω per vertex from
-``leaves[gl_InstanceID]``.
+instanced call; ``leaf.vert`` (built with ``LEAF_INSTANCED``) evaluates L_Ω per vertex from the
+record's :data:`~leafview.gpu.layout.LEAF_ATTRIBUTES`, per-instance vertex attributes read in
+place from the same buffer (nothing is copied), and reads the members of ripples, bends and
+extended silhouettes from the row's texels (:class:`~leafview.gpu.resources.RowTexture`, made only
+when a leaf takes one of those branches) in those branches only.
 
 :class:`BakedLeaves` draws the *same triangles* from world-space positions and normals baked
 ahead of time, either on the CPU with the numpy reference (:meth:`BakedLeaves.from_params`,
@@ -31,10 +34,10 @@ from leafview.core.params import Jitter, LeafParams, Material, Shape, Transform
 from leafview.deform.surface import grid_indices, grid_uv, tessellate
 from leafview.errors import GpuLimitError
 from leafview.gpu.frame import FrameUniforms, Lighting
-from leafview.gpu.layout import LEAF_BLOCK, LEAVES_BINDING, feature_defines, pack_leaves
+from leafview.gpu.layout import LEAF_BLOCK, LEAVES_BINDING, feature_defines, needs_row_texture, pack_leaves
 from leafview.gpu.limits import capture_bytes, check_buffer, check_grid, ensure_alive
 from leafview.gpu.owner import GLObjects
-from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, JitterTable
+from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, Grid, JitterTable, RowTexture, record_vertex_array
 from leafview.gpu.targets import OffscreenTarget, read_rgba
 from leafview.scene.camera import Camera
 
@@ -197,6 +200,13 @@ class InstancedLeaves(_Batch):
                                                        varyings=WORLD_VARYINGS)
             self.ssbo = self._own(ctx.buffer(recs.tobytes() if self.count else bytes(LEAF_BLOCK.nbytes)))
             self.resources.prepare.run(self.ssbo, self.count)  # derived per-leaf fields, one dispatch
+            self.rows = self._own(RowTexture(ctx, self.ssbo, self.count)) if needs_row_texture(recs) else None
+            # the grid of this batch (its vertex arrays hold its buffers: not one the shared cache
+            # may evict), drawn as triangles and captured as points, the rows as instanced attributes
+            self.grid = self._own(Grid(ctx, self.nu, self.nv))
+            self.vao = self._own(record_vertex_array(ctx, self.program, self.grid.vbo, self.ssbo, LEAF_BLOCK,
+                                                     self.grid.ibo))
+            self.points = self._own(record_vertex_array(ctx, self.program, self.grid.vbo, self.ssbo, LEAF_BLOCK))
             # every leaf's ripple signal (rows as pack_leaves assigned them), one dispatch for all
             self.ripples = self._own(self.resources.ripple_pass())
             self.ripples.update(list(ripple_signals))
@@ -207,7 +217,8 @@ class InstancedLeaves(_Batch):
 
     def _bind(self) -> None:
         super()._bind()
-        self.ssbo.bind_to_storage_buffer(LEAVES_BINDING)
+        if self.rows is not None:
+            self.rows.use()
         self.jitter.use()
         self.ripples.bind()
 
@@ -217,7 +228,7 @@ class InstancedLeaves(_Batch):
             return
         self.ctx.enable_only(moderngl.DEPTH_TEST)
         self._bind()
-        self.resources.grid(self.nu, self.nv).vao(self.program).render(moderngl.TRIANGLES, instances=self.count)
+        self.vao.render(moderngl.TRIANGLES, instances=self.count)
 
     def capture(self) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         """World positions and normals of every grid vertex of every instance as the vertex
@@ -230,8 +241,7 @@ class InstancedLeaves(_Batch):
         check_buffer(capture_bytes(self.count * nverts), "leaves",
                      f"capturing {self.count:,} leaves of {self.nu}×{self.nv} vertices")
         self._bind()
-        points = self.resources.grid(self.nu, self.nv).points(self.program)
-        pos, nrm = self.resources.capture.points(points, nverts, self.count)
+        pos, nrm = self.resources.capture.points(self.points, nverts, self.count)
         return pos.reshape(self.count, nverts, 3), nrm.reshape(self.count, nverts, 3)
 
 

@@ -16,18 +16,25 @@
   (``leaf_half(rec)``); Python writes and reads them through :func:`write_slot` /
   :func:`read_slot`, the numpy twins the readback test compares with.
 
+* **Vertex attributes**: the members every vertex of a leaf reads (:data:`LEAF_VERTEX_BLOCK`) are
+  fed to ``leaf.vert`` as per-instance vertex attributes (:data:`LEAF_ATTRIBUTES`), straight out
+  of a buffer of LeafData rows or of the compact LeafVertex records a scene's culling writes;
+  :func:`attribute_format` gives the moderngl format of either, :func:`attributes_glsl` the
+  declarations. llvmpipe runs storage-buffer reads in the vertex stage as per-vertex gathers,
+  while an instanced attribute is fetched once per instance.
+
 Tests check each block against the size the linked program reflects, every program's reflected
 bindings against :data:`BINDINGS`, and every accessor against its numpy twin.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Container, Iterable
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.blade import APEX, BASE, JITTER_TABLE_SIZE, jitter_table
 from leafview.core.params import MAX_SILHOUETTE_ROWS, LeafParams
@@ -38,10 +45,13 @@ __all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "SPECIES_CULL_BLOCK", "DRAW_COM
            "Binding", "BINDINGS", "binding_defines", "bindings_glsl",
            "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "SIGNALS_BINDING", "SPECIES_OF_BINDING",
            "SPECIES_BINDING", "COMMANDS_BINDING", "VISIBLE_BINDING", "FBM_JOBS_BINDING", "READBACK_BINDING",
-           "JITTER_UNIT", "ATLAS_UNIT",
-           "Slot", "LEAF_SLOTS", "PAIR_MEMBERS", "read_slot", "write_slot", "read_pair", "accessors_glsl",
+           "VERTICES_BINDING", "JITTER_UNIT", "ATLAS_UNIT", "ROWS_UNIT",
+           "Slot", "LEAF_SLOTS", "BRANCH_RIPPLE", "BRANCH_BEND", "BRANCH_ROWS", "branch_code", "without_derived", "PAIR_MEMBERS", "read_slot", "write_slot", "read_pair", "accessors_glsl",
            "struct_from_dtype", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources",
-           "AovOutput", "AOV_OUTPUTS", "LEAF_OFFSET_UNIFORM", "aov_outputs_glsl"]
+           "AovOutput", "AOV_OUTPUTS", "LEAF_OFFSET_UNIFORM", "aov_outputs_glsl",
+           "LEAF_VERTEX_BLOCK", "LeafAttribute", "LEAF_ATTRIBUTES", "MAX_VERTEX_ATTRIBUTES", "attribute_format",
+           "attributes_glsl", "vertex_records", "ROW_TEXELS", "ROWS_PER_LINE", "MAX_TEXTURE_SIZE", "row_texture_size",
+           "needs_row_texture", "row_glsl"]
 
 _TYPES = {"vec4": ("<f4", (4,)), "ivec4": ("<i4", (4,)), "mat4": ("<f4", (4, 4))}
 
@@ -180,7 +190,7 @@ FBM_JOB_DTYPE = np.dtype([("seed", "<u4"), ("beta", "<f4"), ("n", "<u4"), ("offs
 # sampler a texture unit of its own: a buffer bound for one pass can never alias another's.
 LEAF_BINDING = 0         # uniform Leaf: one LeafData (single-leaf draws and capture)
 FRAME_BINDING = 1        # uniform Frame: camera, lights and output flags
-LEAVES_BINDING = 2       # storage Leaves: LeafData rows (instancing, scenes, the prepare pass)
+LEAVES_BINDING = 2       # storage Leaves: LeafData rows (the prepare pass, a scene's culling passes)
 SIGNALS_BINDING = 3      # storage Signals: fBm ripple signals, RIPPLE_SAMPLES floats a row
 SPECIES_OF_BINDING = 4   # storage SpeciesOf: species index of each scene leaf
 SPECIES_BINDING = 5      # storage Species: SpeciesCull rows
@@ -188,8 +198,10 @@ COMMANDS_BINDING = 6     # storage Commands: one DrawCommand per level of detail
 VISIBLE_BINDING = 7      # storage Visible: visible leaf indices, one list per level
 FBM_JOBS_BINDING = 8     # storage Jobs: the FbmJob rows of one synthesis dispatch
 READBACK_BINDING = 9     # storage: output of readback probes (tests compare GLSL with numpy)
+VERTICES_BINDING = 10    # storage Vertices: LeafVertex records of a scene's visible leaves
 JITTER_UNIT = 0          # sampler jitter_table: jitter rows, one per seed
 ATLAS_UNIT = 1           # sampler atlas: Dear ImGui's font atlas or user image
+ROWS_UNIT = 2            # sampler leaf_rows: LeafData rows as texels (the optional branches' members)
 
 
 @dataclass(frozen=True)
@@ -215,8 +227,10 @@ BINDINGS: tuple[Binding, ...] = (
     Binding("VISIBLE_BINDING", VISIBLE_BINDING, "storage", "Visible", "visible leaves per level"),
     Binding("FBM_JOBS_BINDING", FBM_JOBS_BINDING, "storage", "Jobs", "fBm synthesis jobs"),
     Binding("READBACK_BINDING", READBACK_BINDING, "storage", "", "readback probes (tests)"),
+    Binding("VERTICES_BINDING", VERTICES_BINDING, "storage", "Vertices", "LeafVertex records of visible leaves"),
     Binding("JITTER_UNIT", JITTER_UNIT, "sampler", "jitter_table", "jitter rows"),
     Binding("ATLAS_UNIT", ATLAS_UNIT, "sampler", "atlas", "imgui texture"),
+    Binding("ROWS_UNIT", ROWS_UNIT, "sampler", "leaf_rows", "LeafData rows as texels"),
 )
 
 
@@ -255,11 +269,21 @@ class Slot:
     component: int
     kind: str
     doc: str = ""
+    derived: bool = False  # written by a GPU pass (``set_<accessor>(rec, value)``), not by the packer
 
     def glsl(self) -> str:
         read = f"(rec).{self.member}.{'xyzw'[self.component]}"
         expr = {"float": read, "int": f"int({read})", "bool": f"({read} > 0.0)"}[self.kind]
-        return f"#define {self.accessor}(rec) ({expr})  // {self.doc}"
+        line = f"#define {self.accessor}(rec) ({expr})  // {self.doc}"
+        if self.derived:
+            line += f"\n#define set_{self.accessor}(rec, value) ({read} = float(value))"
+        return line
+
+    def row_glsl(self) -> str:
+        """``ROW_<accessor>``: the same number of the branch record (see :func:`row_glsl`)."""
+        read = f"ROW_{self.member}.{'xyzw'[self.component]}"
+        expr = {"float": read, "int": f"int({read})", "bool": f"({read} > 0.0)"}[self.kind]
+        return f"#define ROW_{self.accessor} ({expr})"
 
 
 LEAF_SLOTS: tuple[Slot, ...] = (
@@ -275,6 +299,13 @@ LEAF_SLOTS: tuple[Slot, ...] = (
     Slot("leaf_signal_row", "deform", 3, "int", "row of the ripple signal buffer"),
     Slot("leaf_twist", "bend_axis", 3, "float", "twist at the apex (radians)"),
     Slot("leaf_rows", "tilt", 3, "int", "silhouette rows N of an extended leaf, 0 otherwise"),
+    # spare components of the members read as vertex attributes (LEAF_VERTEX_BLOCK), so that the
+    # vertex stage learns which branches a leaf takes, and a scene's vertex record its row,
+    # without reading the storage buffer:
+    Slot("leaf_branches", "a1", 3, "int", "BRANCH_RIPPLE + BRANCH_BEND + BRANCH_ROWS * N (leaf_prepare.comp)",
+         derived=True),
+    Slot("leaf_vertex_row", "a2", 3, "int", "a scene's vertex record: the leaf's row in its batch (scene_compact.comp)",
+         derived=True),
 )
 _SLOTS = {slot.accessor: slot for slot in LEAF_SLOTS}
 
@@ -316,6 +347,32 @@ def write_slot(record: np.ndarray, accessor: str, value: float) -> None:
     record[slot.member][slot.component] = value
 
 
+# the branch code (leaf_branches): which optional parts of leaf_eval.glsl a leaf takes
+BRANCH_RIPPLE = 1   # ripples on (leaf_ripple_on)
+BRANCH_BEND = 2     # bending on (leaf_bend_on)
+BRANCH_ROWS = 4     # times the silhouette rows N of an extended leaf (leaf_rows), 0 otherwise
+
+
+def branch_code(records: np.ndarray) -> NDArray[np.int32]:
+    """What ``leaf_prepare.comp`` writes to ``leaf_branches`` of each record (the numpy twin)."""
+    code = (BRANCH_RIPPLE * read_slot(records, "leaf_ripple_on").astype(np.int32)
+            + BRANCH_BEND * read_slot(records, "leaf_bend_on").astype(np.int32)
+            + BRANCH_ROWS * read_slot(records, "leaf_rows"))
+    return np.asarray(code, np.int32)
+
+
+def without_derived(records: np.ndarray) -> NDArray[Any]:
+    """A copy of LeafData ``records`` with every derived member and derived slot zeroed: what the
+    packer wrote, whether or not the prepare pass has run since."""
+    out = np.array(records, copy=True)
+    for name in LEAF_BLOCK.derived:
+        out[name] = 0
+    for slot in LEAF_SLOTS:
+        if slot.derived:
+            out[slot.member][..., slot.component] = 0
+    return out
+
+
 def read_pair(records: np.ndarray, accessor: str, j: int) -> NDArray[np.float32]:
     """What ``accessor(rec, j)`` of :data:`PAIR_MEMBERS` reads: pair ``j`` (..., 2)."""
     half = 2 * (j % 2)
@@ -326,6 +383,11 @@ def accessors_glsl() -> str:
     """GLSL accessor macros of :data:`LEAF_SLOTS` and :data:`PAIR_MEMBERS`."""
     lines = ["// generated from leafview/gpu/layout.py: packed fields of LeafData"]
     lines += [slot.glsl() for slot in LEAF_SLOTS]
+    lines += [f"#define LEAF_BRANCH_RIPPLE {BRANCH_RIPPLE}", f"#define LEAF_BRANCH_BEND {BRANCH_BEND}",
+              f"#define LEAF_BRANCH_ROWS {BRANCH_ROWS}",
+              "#define leaf_has_ripple(rec) ((leaf_branches(rec) & LEAF_BRANCH_RIPPLE) != 0)",
+              "#define leaf_has_bend(rec) ((leaf_branches(rec) & LEAF_BRANCH_BEND) != 0)",
+              "#define leaf_branch_rows(rec) (leaf_branches(rec) / LEAF_BRANCH_ROWS)"]
     # one vec4 load per pair: the element is passed by value to a helper that picks its half (a
     # macro that indexed the member in both branches made llvmpipe gather the element twice)
     lines.append("vec2 leafview_pair_half(vec4 element, int j) { return (j % 2 == 0) ? element.xy : element.zw; }")
@@ -439,6 +501,174 @@ def pack_leaves(params: Iterable[LeafParams]) -> tuple[NDArray[Any], NDArray[np.
     return recs, table.astype(np.float32)
 
 
+# -- per-instance vertex attributes (leaf.vert with LEAF_INSTANCED or LEAF_INDIRECT) ----------------
+# The members every vertex reads: Ω's axis (a1, a2, with the branch code and a scene record's row in
+# their spare w), jitter, colours, the model matrix and the prepare pass's per-row constants. The
+# members only ripples, bends and extended silhouettes need stay in the storage buffer, read in
+# those branches only.
+LEAF_VERTEX_BLOCK = Block(
+    "LeafVertex", "LeafVertexBlock",
+    tuple(m for m in LEAF_BLOCK.members
+          if m[0] in ("a1", "a2", "jitter", "front", "back", "model", "axis", "heights")),
+    "what every vertex of a leaf reads, as instanced vertex attributes (a subset of LeafData)",
+)
+MAX_VERTEX_ATTRIBUTES = 16
+"""GL_MAX_VERTEX_ATTRIBS that OpenGL guarantees (llvmpipe offers no more): the record's
+attributes plus ``in_uv`` must fit."""
+MAX_ATTRIBUTE_STRIDE = 2048
+"""GL_MAX_VERTEX_ATTRIB_STRIDE that OpenGL 4.4 guarantees: a LeafData row is read in place."""
+
+
+@dataclass(frozen=True)
+class LeafAttribute:
+    """One vec4 vertex input of ``leaf.vert``: element ``element`` of LeafData member ``member``
+    (a mat4's column, an array's entry; 0 for a vec4)."""
+
+    name: str
+    member: str
+    element: int
+
+    def offset(self, block: Block) -> int:
+        """Byte offset of this vec4 in a row of ``block``."""
+        fields = block.dtype.fields
+        assert fields is not None
+        return int(fields[self.member][1]) + 16 * self.element
+
+
+def _leaf_attributes(block: Block) -> tuple[LeafAttribute, ...]:
+    out: list[LeafAttribute] = []
+    for name, glsl, count in block.members:
+        if glsl not in ("vec4", "mat4"):
+            raise AssertionError(f"{name}: only float members can be vertex attributes")
+        n = count * (4 if glsl == "mat4" else 1)
+        out += [LeafAttribute(f"in_leaf_{name}" + (str(k) if n > 1 else ""), name, k) for k in range(n)]
+    if len(out) + 1 > MAX_VERTEX_ATTRIBUTES:
+        raise AssertionError(f"{len(out)} record attributes and in_uv exceed {MAX_VERTEX_ATTRIBUTES}")
+    if LEAF_BLOCK.nbytes > MAX_ATTRIBUTE_STRIDE:
+        raise AssertionError(f"a {LEAF_BLOCK.nbytes}-byte LeafData row exceeds the vertex stride limit")
+    return tuple(out)
+
+
+LEAF_ATTRIBUTES = _leaf_attributes(LEAF_VERTEX_BLOCK)
+
+
+def attribute_format(block: Block, present: Container[str] | None = None) -> tuple[str, tuple[str, ...]]:
+    """moderngl buffer format (one row per instance, ``/i``) and attribute names that read
+    :data:`LEAF_ATTRIBUTES` from a buffer of ``block`` rows: :data:`LEAF_BLOCK` (the leaves'
+    storage buffer itself, nothing copied) or :data:`LEAF_VERTEX_BLOCK` (compact records).
+    Attributes not in ``present`` (e.g. a program that compiled them out) become padding."""
+    parts: list[str] = []
+    names: list[str] = []
+    at = 0
+    for attr in sorted(LEAF_ATTRIBUTES, key=lambda a: a.offset(block)):
+        if present is not None and attr.name not in present:
+            continue
+        offset = attr.offset(block)
+        if offset > at:
+            parts.append(f"{offset - at}x")
+        parts.append("4f")
+        names.append(attr.name)
+        at = offset + 16
+    if block.nbytes > at:
+        parts.append(f"{block.nbytes - at}x")
+    return " ".join(parts) + "/i", tuple(names)
+
+
+def vertex_records(rows: np.ndarray, picks: ArrayLike) -> NDArray[Any]:
+    """The LEAF_VERTEX_BLOCK records of LeafData ``rows[picks]``, each with its row in
+    ``leaf_vertex_row``: what ``scene_compact.comp`` writes for a list of visible leaves (the numpy
+    twin of ``LEAF_VERTEX_OF`` and ``set_leaf_vertex_row``)."""
+    idx = np.asarray(picks, np.int64).reshape(-1)
+    out = np.zeros(idx.size, LEAF_VERTEX_BLOCK.dtype)
+    for name, _, _ in LEAF_VERTEX_BLOCK.members:
+        out[name] = rows[name][idx]
+    write = _SLOTS["leaf_vertex_row"]
+    out[write.member][:, write.component] = idx
+    return out
+
+
+def _vertex_glsl() -> str:
+    """The LeafVertex struct and ``LEAF_VERTEX_OF(rec)``, its fields of a LeafData ``rec``."""
+    members = ", ".join(f"(rec).{name}" for name, _, _ in LEAF_VERTEX_BLOCK.members)
+    return (LEAF_VERTEX_BLOCK.struct_glsl()
+            + f"#define LEAF_VERTEX_OF(rec) {LEAF_VERTEX_BLOCK.struct_name}({members})\n")
+
+
+def attributes_glsl() -> str:
+    """The vertex inputs of :data:`LEAF_ATTRIBUTES` and ``leaf_vertex_attributes()``, the
+    LeafVertex they make up (after ``generated/leaf_vertex.glsl``)."""
+    lines = ["// generated from leafview/gpu/layout.py: LEAF_ATTRIBUTES, one row per instance"]
+    lines += [f"in vec4 {a.name};" for a in LEAF_ATTRIBUTES]
+    args = []
+    for name, glsl, count in LEAF_VERTEX_BLOCK.members:
+        cols = [a.name for a in LEAF_ATTRIBUTES if a.member == name]
+        if glsl == "mat4":
+            args.append(f"mat4({', '.join(cols)})")
+        elif count > 1:
+            args.append(f"vec4[{count}]({', '.join(cols)})")
+        else:
+            args.append(cols[0])
+    lines.append(f"{LEAF_VERTEX_BLOCK.struct_name} leaf_vertex_attributes() {{\n"
+                 f"    return {LEAF_VERTEX_BLOCK.struct_name}({', '.join(args)});\n}}")
+    return "\n".join(lines) + "\n"
+
+
+# -- the members of the optional branches as a texture (leaf.vert with LEAF_ROW_TEXTURE) ------------
+# Ripples, bends and extended silhouettes read members outside LEAF_VERTEX_BLOCK. The instanced and
+# scene paths read them from an RGBA32F texture holding the LeafData rows texel for texel (a copy of
+# the storage buffer, ROWS_PER_LINE rows per texture line): llvmpipe fetches texels faster than it
+# gathers storage-buffer reads.
+ROW_TEXELS = LEAF_BLOCK.nbytes // 16
+MAX_TEXTURE_SIZE = 16384
+"""GL_MAX_TEXTURE_SIZE that OpenGL 4.5 guarantees."""
+ROWS_PER_LINE = MAX_TEXTURE_SIZE // ROW_TEXELS
+
+
+def row_texture_size(count: int) -> tuple[int, int]:
+    """(width, height) of the row texture of ``count`` rows (at least one line); rows fill the lines
+    in order, so a buffer of rows maps onto the texture byte for byte."""
+    lines = max(1, -(-int(count) // ROWS_PER_LINE))
+    return ROWS_PER_LINE * ROW_TEXELS, lines
+
+
+def needs_row_texture(records: np.ndarray) -> bool:
+    """Whether a draw of ``records`` takes a branch that reads the row texture (ripples, bending or
+    an extended silhouette): without one, no program variant of the draw samples it."""
+    recs = np.atleast_1d(records)
+    return bool(read_slot(recs, "leaf_ripple_on").any() or read_slot(recs, "leaf_bend_on").any()
+                or (read_slot(recs, "leaf_rows") > 0).any())
+
+
+def row_glsl() -> str:
+    """``ROW_<member>`` (``ROW_<member>(i)`` for arrays) and ``ROW_<accessor>`` of every LeafData
+    member outside LEAF_VERTEX_BLOCK, the members of the optional branches: texels of row
+    ``LEAF_ROW_INDEX`` of the ``leaf_rows`` texture when ``LEAF_ROW_TEXTURE`` is defined, else the
+    members of the struct ``LEAF_ROW``. Each is read where it is used."""
+    fields = LEAF_BLOCK.dtype.fields
+    assert fields is not None
+    vertex = {name for name, _, _ in LEAF_VERTEX_BLOCK.members}
+    members = [(name, count) for name, _, count in LEAF_BLOCK.members if name not in vertex]
+    lines = ["// generated from leafview/gpu/layout.py: the optional branches' members (row_glsl)",
+             "#ifdef LEAF_ROW_TEXTURE",
+             "layout(binding = ROWS_UNIT) uniform sampler2D leaf_rows;",
+             "vec4 leaf_row_texel(int k) {",
+             f"    int row = int(LEAF_ROW_INDEX), line = row / {ROWS_PER_LINE};",
+             f"    return texelFetch(leaf_rows, ivec2((row - line * {ROWS_PER_LINE}) * {ROW_TEXELS} + k, line), 0);",
+             "}"]
+    for name, count in members:
+        first = int(fields[name][1]) // 16
+        lines.append(f"#define ROW_{name}(i) leaf_row_texel({first} + (i))" if count > 1
+                     else f"#define ROW_{name} leaf_row_texel({first})")
+    lines.append("#else")
+    for name, count in members:
+        lines.append(f"#define ROW_{name}(i) (LEAF_ROW.{name}[i])" if count > 1 else f"#define ROW_{name} (LEAF_ROW.{name})")
+    lines.append("#endif")
+    lines += [slot.row_glsl() for slot in LEAF_SLOTS if slot.member not in vertex]
+    for accessor, member in PAIR_MEMBERS.items():
+        lines.append(f"#define ROW_{accessor}(j) leafview_pair_half(ROW_{member}((j) / 2), (j))")
+    return "\n".join(lines) + "\n"
+
+
 # -- per-pixel label outputs (leafview/gpu/aov.py) ----------------------------------------------
 @dataclass(frozen=True)
 class AovOutput:
@@ -501,6 +731,9 @@ def generated_sources() -> dict[str, str]:
                                      f"const vec3 LEAF_APEX = vec3({_vec(APEX)});\n"),
         "generated/leaf_block.glsl": ("#include \"generated/constants.glsl\"\n" + LEAF_BLOCK.glsl("LEAF_BINDING")
                                       + accessors_glsl()),
+        "generated/leaf_vertex.glsl": _vertex_glsl(),
+        "generated/leaf_attributes.glsl": attributes_glsl(),
+        "generated/leaf_row.glsl": row_glsl(),
         "generated/frame_block.glsl": FRAME_BLOCK.glsl("FRAME_BINDING"),
         "generated/scene_blocks.glsl": (SPECIES_CULL_BLOCK.struct_glsl()
                                         + struct_from_dtype("DrawCommand", DRAW_COMMAND_DTYPE)),

@@ -23,8 +23,9 @@ from numpy.typing import ArrayLike, NDArray
 from leafview.core.params import Jitter
 from leafview.deform.fbm import RIPPLE_SAMPLES
 from leafview.deform.surface import JITTER_TABLE_SIZE, grid_indices, grid_uv, jitter_table
+from leafview.errors import GpuLimitError
 from leafview.gpu.capture import FeedbackCapture
-from leafview.gpu.layout import JITTER_UNIT
+from leafview.gpu.layout import JITTER_UNIT, LEAF_BLOCK, ROWS_UNIT, Block, attribute_format, row_texture_size
 from leafview.gpu.limits import check_grid
 from leafview.gpu.owner import GLObjects, ReleasingLRU, next_pow2
 from leafview.gpu.prepare import LeafPrepare
@@ -32,7 +33,8 @@ from leafview.gpu.programs import ProgramCache
 from leafview.gpu.ripple import RipplePass
 from leafview.gpu.targets import RenderTarget
 
-__all__ = ["GpuResources", "Grid", "JitterTable", "LEAF_SPACE_VARYINGS", "WORLD_VARYINGS"]
+__all__ = ["GpuResources", "Grid", "JitterTable", "RowTexture", "LEAF_SPACE_VARYINGS", "WORLD_VARYINGS",
+           "record_vertex_array"]
 
 LEAF_SPACE_VARYINGS = ("v_object", "v_object_normal")   # captures in leaf space (tests, export)
 WORLD_VARYINGS = ("v_world", "v_normal")                 # captures in world space (baking)
@@ -77,6 +79,54 @@ class Grid:
     def release(self) -> None:
         self._vaos.release()
         self._objects.release()
+
+
+def record_vertex_array(ctx: moderngl.Context, program: moderngl.Program, uv: moderngl.Buffer,
+                        records: moderngl.Buffer, block: Block,
+                        index_buffer: moderngl.Buffer | None = None) -> moderngl.VertexArray:
+    """A vertex array of ``leaf.vert`` built with ``LEAF_INSTANCED`` or ``LEAF_INDIRECT``: ``in_uv``
+    per vertex from ``uv`` and the leaf record's attributes
+    (:data:`~leafview.gpu.layout.LEAF_ATTRIBUTES`) per instance from ``records``, a buffer of
+    ``block`` rows (the leaves' storage buffer read in place, or a scene's compact vertex records;
+    see :func:`~leafview.gpu.layout.attribute_format`). With ``index_buffer``: indexed triangles
+    (32-bit indices); without: every vertex once (transform-feedback capture)."""
+    fmt, names = attribute_format(block, present=frozenset(program))
+    content = [(uv, "2f", "in_uv"), (records, fmt, *names)]
+    if index_buffer is None:
+        return ctx.vertex_array(program, content)
+    return ctx.vertex_array(program, content, index_buffer=index_buffer, index_element_size=4)
+
+
+class RowTexture:
+    """``count`` LeafData rows of ``rows`` (a buffer, after the prepare pass) as an RGBA32F texture,
+    texel for texel (:func:`~leafview.gpu.layout.row_texture_size`): what ``leaf.vert``'s ripple,
+    bend and extended-silhouette branches read (``LEAF_ROW_TEXTURE``), at texture unit
+    ``ROWS_UNIT``. The copy stays on the GPU (through a buffer padded to whole texture lines)."""
+
+    def __init__(self, ctx: moderngl.Context, rows: moderngl.Buffer, count: int) -> None:
+        width, height = row_texture_size(count)
+        limit = int(ctx.info["GL_MAX_TEXTURE_SIZE"])
+        if max(width, height) > limit:
+            raise GpuLimitError("leaves", f"{count:,} leaf rows need a {width}×{height} texture, above this "
+                                f"driver's GL_MAX_TEXTURE_SIZE = {limit}")
+        self.texture = ctx.texture((width, height), 4, dtype="f4")
+        try:
+            self.texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            padded = ctx.buffer(reserve=width * height * 16)
+            try:
+                ctx.copy_buffer(padded, rows, size=min(int(count), rows.size // LEAF_BLOCK.nbytes) * LEAF_BLOCK.nbytes)
+                self.texture.write(padded)
+            finally:
+                padded.release()
+        except BaseException:
+            self.texture.release()
+            raise
+
+    def use(self) -> None:
+        self.texture.use(location=ROWS_UNIT)
+
+    def release(self) -> None:
+        self.texture.release()
 
 
 class JitterTable:

@@ -8,9 +8,12 @@ Per frame, for each batch of leaves:
 2. ``scene_cull.comp`` tests every leaf's bounding sphere against the frustum and a minimum
    projected size, picks its level (the coarsest grid whose outline error stays under
    ``max_error_px``) and appends its index to that level's list;
-3. ``glMultiDrawElementsIndirect`` draws the levels' grids; ``leaf.vert`` (``LEAF_INDIRECT``)
-   reads the leaf index as a per-instance attribute from the list (the command's
-   ``baseInstance`` selects the list) and evaluates the leaf from its row.
+3. ``scene_compact.comp`` copies the visible leaves' :data:`~leafview.gpu.layout.LEAF_VERTEX_BLOCK`
+   members (what every vertex reads) into one compact array, level after level, and points each
+   command's ``baseInstance`` at its level's first record;
+4. ``glMultiDrawElementsIndirect`` draws the levels' grids; ``leaf.vert`` (``LEAF_INDIRECT``)
+   reads the record as per-instance vertex attributes, and the row (for ripples, bends and
+   extended silhouettes, and the label pass's leaf index) through the record's ``leaf_vertex_row``.
 
 No per-leaf work happens on the CPU after the scene is uploaded. Leaf rows are
 :data:`~leafview.gpu.layout.LEAF_BLOCK` records (the same declaration as the single-leaf uniform
@@ -30,9 +33,10 @@ from numpy.typing import NDArray
 from scipy.ndimage import distance_transform_edt
 
 from leafview.core.defaults import DEFAULT_GRID
-from leafview.core.params import LeafParams
-from leafview.deform.surface import evaluate, grid_indices, grid_uv
+from leafview.core.params import Bending, LeafParams
+from leafview.deform.surface import drawn_uv, evaluate, grid_indices, grid_uv
 from leafview.errors import SceneLimitError
+from leafview.gpu.bounds import LeafBounds
 from leafview.gpu.context import check_error
 from leafview.gpu.frame import FrameUniforms, Lighting
 from leafview.gpu.layout import (
@@ -40,19 +44,24 @@ from leafview.gpu.layout import (
     DRAW_COMMAND_DTYPE,
     LEAF_BLOCK,
     LEAF_OFFSET_UNIFORM,
+    LEAF_VERTEX_BLOCK,
     LEAVES_BINDING,
     SPECIES_BINDING,
     SPECIES_CULL_BLOCK,
     SPECIES_OF_BINDING,
+    VERTICES_BINDING,
     VISIBLE_BINDING,
     feature_defines,
+    needs_row_texture,
     pack_leaves,
     ripple_keys,
+    write_slot,
 )
-from leafview.gpu.limits import MAX_RESOURCE_BYTES, capture_bytes, check_scene, ensure_alive
+from leafview.gpu.limits import check_scene, ensure_alive
 from leafview.gpu.owner import GLObjects
-from leafview.gpu.resources import GpuResources, JitterTable
+from leafview.gpu.resources import GpuResources, JitterTable, RowTexture, record_vertex_array
 from leafview.resources import resolve_preset
+from leafview.scene.bends import bend_profiles
 from leafview.scene.camera import Camera, top_down
 from leafview.scene.spec import Scene, SceneSpec
 
@@ -66,50 +75,109 @@ _LOCAL = 64
 # the stems' vertex record: (attribute, format, the same bytes skipped)
 _STEM_ATTRS = (("in_position", "3f", "12x"), ("in_normal", "3f", "12x"), ("in_uv", "2f", "8x"),
                ("in_front", "4f1", "4x"), ("in_back", "4f1", "4x"))
-_CULL_CHUNK = 8192     # species records captured at once when measuring culling spheres and LOD errors
 
 
 # -- packing (numpy) ------------------------------------------------------------------------------
 def species_tables(scene: Scene) -> tuple[NDArray[Any], NDArray[np.float32], list[tuple[int, float]]]:
-    """Per-species LEAF_BLOCK records (bend solved once per distinct species), the jitter table
-    rows they index and the ripple signal keys (row i of the signal buffer). Species that differ
-    only in name (a leaf set's leaves of one shape) are packed once."""
+    """Per-species LEAF_BLOCK records, the jitter table rows they index and the ripple signal keys
+    (row i of the signal buffer), equal to :func:`~leafview.gpu.layout.pack_leaves` of the species.
+
+    Species that differ only in Ω's 21 numbers, their colours and their bend profile (a leaf set:
+    a species per leaf) share one *template* record, packed once; each species' Ω and colours then
+    go straight into its row, vectorised, and the bend profiles of the bent ones are solved
+    together, once per distinct shape, bending and frame (:func:`leafview.scene.bends.bend_profiles`).
+    An extended silhouette is a template of its own (its further rows depend on its whole shape)."""
     index: dict[tuple[Any, ...], int] = {}
-    species: list[LeafParams] = []
-    inverse = np.empty(len(scene.species), np.int64)
+    by_identity: dict[tuple[int, ...], int] = {}   # the same objects (shared by the species) hash once
+    templates: list[LeafParams] = []
+    template_of = np.empty(len(scene.species), np.int64)
+    values: list[tuple[float, ...]] = []
+    bends: dict[tuple[Any, ...], int] = {}         # distinct bend problems
+    bent: list[tuple[int, int]] = []               # (species, bend problem)
     for i, sp in enumerate(scene.species):
-        key = (sp.shape, sp.jitter, sp.material, sp.transform, sp.ripple, sp.bending)
-        k = index.get(key)
+        s, m, t = sp.shape, sp.material, sp.transform
+        # the objects of the key are the species' own, alive as long as the scene: ids stay unique
+        parts = (s if s.extended else s.half, sp.jitter, m.translucency, t, sp.ripple, sp.bending)
+        ids = tuple(map(id, parts))
+        k = by_identity.get(ids)
         if k is None:
-            k = index[key] = len(species)
-            species.append(sp)
-        inverse[i] = k
-    recs, table = pack_leaves(species)
-    return recs[inverse], table, ripple_keys(species)
+            k = index.get(parts)
+            if k is None:
+                k = index[parts] = len(templates)
+                templates.append(sp)
+            by_identity[ids] = k
+        template_of[i] = k
+        (v1, x1, z1), (v2, x2, z2), (v3, x3, z3) = s.silhouette[:3]
+        values.append((*s.a1, *s.a2, v1, v2, v3, x1, x2, x3, z1, z2, z3, *s.zf[:3], *s.zg[:3], *m.front, *m.back))
+        if sp.bending.active:
+            bent.append((i, bends.setdefault((s, sp.bending, t.rotation, t.scale), len(bends))))
+    unbent = Bending()
+    recs_t, table = pack_leaves([t.replace(bending=unbent) if t.bending.active else t for t in templates])
+    recs = recs_t[template_of]
+    if len(recs):
+        col = np.asarray(values, np.float64).astype(np.float32)
+        for j, name in enumerate(("a1", "a2", "vbar", "xs", "zs", "zf", "zg", "front", "back")):
+            recs[name][:, :3] = col[:, 3 * j:3 * j + 3]
+    if bent:
+        first: dict[int, int] = {}                 # bend problem -> the first species that poses it
+        for i, b in bent:
+            first.setdefault(b, i)
+        profiles = bend_profiles([scene.species[first[b]] for b in range(len(bends))])
+        for i, b in bent:
+            p, rec = profiles[b], recs[i]
+            write_slot(rec, "leaf_bend_on", 1.0)
+            rec["bend_axis"][:3] = p.axis
+            write_slot(rec, "leaf_twist", p.twist)
+            rec["bend"][:, :3] = p.delta
+            rec["bend"][:, 3] = p.phi
+    return recs, table, ripple_keys(templates)
+
+
+# Ω's members in LEAF_BLOCK order and, for each, the columns of Scene.factors (VARIED order) that scale them
+_OMEGA_MEMBERS = ("a1", "a2", "vbar", "xs", "zs", "zf", "zg")
+_OMEGA_FACTORS = np.array([0, 1, 2, 3, 4, 5, 6, 9, 12, 7, 10, 13, 8, 11, 14, 15, 16, 17, 18, 19, 20])
+_PACK_CHUNK = 2048     # rows packed at once (1.6 MB of records)
+
+
+def _vec4_run(recs: NDArray[Any], members: Sequence[str]) -> NDArray[np.float32]:
+    """(N, len(members), 4) float32 view of consecutive vec4 members of LEAF_BLOCK records."""
+    fields = recs.dtype.fields
+    assert fields is not None
+    first = int(fields[members[0]][1])
+    assert [int(fields[m][1]) for m in members] == list(range(first, first + 16 * len(members), 16)), members
+    return np.ndarray((len(recs), len(members), 4), np.float32, recs, first, (recs.dtype.itemsize, 16, 4))
 
 
 def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
-               species_records: NDArray[Any] | None = None) -> NDArray[Any]:
+               species_records: NDArray[Any] | None = None, out: NDArray[Any] | None = None) -> NDArray[Any]:
     """LEAF_BLOCK rows of leaves ``start:stop``, vectorised: the species' record with Ω scaled by
     the leaf's factors (as :func:`leafview.scene.spec.vary_shape`), colours by its tint and the
-    model matrix set. Derived members are filled later by the prepare pass on the GPU."""
+    model matrix set. Derived members are filled later by the prepare pass on the GPU. ``out``:
+    records to write into (at least ``stop - start``; the first ones are returned), so that the
+    batches of a large scene reuse one host array.
+
+    Rows are filled :data:`_PACK_CHUNK` at a time, so that each chunk's several passes run in
+    the CPU's cache, and copied from the species' records as bytes (several times faster than
+    field by field)."""
     stop = len(scene) if stop is None else stop
     if species_records is None:
         species_records = species_tables(scene)[0]
-    ids = scene.species_id[start:stop]
-    recs = species_records[ids]
-    f = scene.factors[start:stop].astype(np.float32)
-    recs["a1"][:, :3] *= f[:, 0:3]
-    recs["a2"][:, :3] *= f[:, 3:6]
-    recs["vbar"][:, :3] = np.clip(recs["vbar"][:, :3] * f[:, 6:15:3], np.float32(0.02), np.float32(0.98))
-    recs["xs"][:, :3] *= f[:, 7:15:3]
-    recs["zs"][:, :3] *= f[:, 8:15:3]
-    recs["zf"][:, :3] *= f[:, 15:18]
-    recs["zg"][:, :3] *= f[:, 18:21]
-    t = scene.tint[start:stop, None].astype(np.float32)
-    recs["front"][:, :3] = np.clip(recs["front"][:, :3] * t, 0.0, 1.0)
-    recs["back"][:, :3] = np.clip(recs["back"][:, :3] * t, 0.0, 1.0)
-    recs["model"] = np.transpose(scene.matrices[start:stop], (0, 2, 1)).astype(np.float32)
+    n = stop - start
+    recs = np.empty(n, LEAF_BLOCK.dtype) if out is None else out[:n]
+    row = np.dtype((np.void, LEAF_BLOCK.nbytes))
+    source = np.ascontiguousarray(species_records).view(row)
+    for a in range(0, n, _PACK_CHUNK):
+        b = min(a + _PACK_CHUNK, n)
+        part = recs[a:b]
+        np.take(source, scene.species_id[start + a:start + b], axis=0, out=part.view(row))
+        omega = _vec4_run(part, _OMEGA_MEMBERS)[:, :, :3]
+        omega *= scene.factors[start + a:start + b][:, _OMEGA_FACTORS].reshape(b - a, len(_OMEGA_MEMBERS), 3)
+        vbar = omega[:, _OMEGA_MEMBERS.index("vbar")]
+        np.clip(vbar, np.float32(0.02), np.float32(0.98), out=vbar)
+        colours = _vec4_run(part, ("front", "back"))[:, :, :3]
+        colours *= scene.tint[start + a:start + b, None, None].astype(np.float32)
+        np.clip(colours, np.float32(0.0), np.float32(1.0), out=colours)
+        part["model"] = np.transpose(scene.matrices[start + a:start + b], (0, 2, 1))
     return recs
 
 
@@ -133,12 +201,12 @@ def _lod_error(params: Any, coarse: tuple[int, int], fine: tuple[int, int] = DEF
 
 def species_cull(scene: Scene, grids: Sequence[tuple[int, int]] = LOD_GRIDS) -> NDArray[Any]:
     """SPECIES_CULL_BLOCK rows, the numpy reference: every species evaluated at every level's
-    grid (:func:`leafview.deform.surface.evaluate`), then :func:`cull_rows_from_points`.
-    :class:`SceneRenderer` computes the same rows from the points its vertex shader captures, once
-    per distinct species record."""
+    grid as drawn (:func:`leafview.deform.surface.evaluate` at
+    :func:`~leafview.deform.surface.drawn_uv`), then :func:`cull_rows_from_points`.
+    :class:`SceneRenderer` computes the same rows on the GPU (:mod:`leafview.gpu.bounds`)."""
     if len(grids) > 4:
         raise ValueError("at most 4 levels of detail")
-    points = [np.stack([evaluate(sp, *grid_uv(*g).astype(np.float64).T) for sp in scene.species]) for g in grids]
+    points = [np.stack([evaluate(sp, *drawn_uv(sp, grid_uv(*g)).T) for sp in scene.species]) for g in grids]
     return cull_rows_from_points(points, grids, scene.spec.variation)
 
 
@@ -148,8 +216,8 @@ def cull_rows_from_points(points: Sequence[NDArray[Any]], grids: Sequence[tuple[
     (``points[k]``: (S, nu_k·nv_k, 3), :func:`~leafview.deform.surface.grid_uv` order), vectorised
     over species.
 
-    * ``sphere``: centre of the points' box, radius to the farthest point of any level (every
-      drawn vertex is inside), widened for the variation and by 1e-3.
+    * ``sphere``: centre of the box of the coarsest level's points, radius to the farthest point
+      of any level (every drawn vertex is inside), widened for the variation and by 1e-3.
     * ``lod_error[k]``: largest distance between the level-0 points and the piecewise-bilinear
       surface through level k's points (see :func:`_lod_error`).
 
@@ -162,7 +230,7 @@ def cull_rows_from_points(points: Sequence[NDArray[Any]], grids: Sequence[tuple[
     if n == 0:
         return out
     every = np.concatenate(pts, axis=1)
-    center = (every.min(axis=1) + every.max(axis=1)) / 2
+    center = (pts[-1].min(axis=1) + pts[-1].max(axis=1)) / 2
     radius = np.linalg.norm(every - center[:, None], axis=2).max(axis=1)
     radius += variation * np.linalg.norm(every, axis=2).max(axis=1) + 1e-3
     out["sphere"][:, :3] = center
@@ -181,18 +249,6 @@ def cull_rows_from_points(points: Sequence[NDArray[Any]], grids: Sequence[tuple[
                   + (1 - a) * b * g[:, j + 1, i] + a * b * g[:, j + 1, i + 1])
         out["lod_error"][:, k] = np.linalg.norm(ref - approx, axis=2).max(axis=1) * (1.0 + 2.0 * variation)
     return out
-
-
-def _nested(fine: tuple[int, int], coarse: tuple[int, int]) -> NDArray[np.intp] | None:
-    """Indices of ``coarse``'s (u, v) samples among ``fine``'s (both in
-    :func:`~leafview.deform.surface.grid_uv` order), or None when they are not all among them."""
-    (fu, fv), (cu, cv) = fine, coarse
-    if (fu - 1) % (cu - 1) or (fv - 1) % (cv - 1):
-        return None
-    su, sv = (fu - 1) // (cu - 1), (fv - 1) // (cv - 1)
-    idx = (np.arange(cv)[:, None] * sv * fu + np.arange(cu)[None, :] * su).reshape(-1)
-    fine_uv, coarse_uv = grid_uv(fu, fv), grid_uv(cu, cv)
-    return idx if np.array_equal(fine_uv[idx], coarse_uv) else None
 
 
 def plan_batches(n_leaves: int, max_block_bytes: int, max_groups: int = 65535,
@@ -264,33 +320,41 @@ def cull_reference(scene: Scene, cull_rows: NDArray[Any], camera: Camera, size: 
 # -- GPU ----------------------------------------------------------------------------------------
 class _SceneBatch:
     """GL objects of one batch of leaves: rows, species ids, the per-level visible lists, the
-    draw commands and the vertex array that reads them."""
+    visible leaves' vertex records, the draw commands, the vertex array that reads them and, when a
+    species takes an optional branch, the rows as texels."""
 
     def __init__(self, owner: SceneRenderer, start: int, stop: int) -> None:
         ctx = owner.ctx
         self.start, self.count = start, stop - start
         self._objects = GLObjects()
         try:
-            rows = pack_scene(owner.scene, start, stop, owner.species_records)
-            self.rows = self._objects.own(ctx.buffer(rows.tobytes()))
-            del rows
+            rows = pack_scene(owner.scene, start, stop, owner.species_records, out=owner._host_rows)
+            self.rows = self._objects.own(ctx.buffer(rows))
             owner.resources.prepare.run(self.rows, self.count)
+            # the members of ripples, bends and extended silhouettes as texels, when a species has one
+            self.row_texture = (self._objects.own(RowTexture(ctx, self.rows, self.count))
+                                if needs_row_texture(owner.species_records) else None)
             self.species_of = self._objects.own(
                 ctx.buffer(owner.scene.species_id[start:stop].astype(np.uint32).tobytes()))
             levels = len(owner.grids)
             self.visible = self._objects.own(ctx.buffer(reserve=4 * self.count * levels))
+            self.vertices = self._objects.own(ctx.buffer(reserve=LEAF_VERTEX_BLOCK.nbytes * self.count))
             self.reset = np.zeros(levels, DRAW_COMMAND_DTYPE)
             self.reset["count"] = owner.index_counts
             self.reset["first_index"] = owner.first_index
             self.reset["base_vertex"] = owner.base_vertex
             self.reset["base_instance"] = np.arange(levels) * self.count
             self.commands = self._objects.own(ctx.buffer(self.reset.tobytes()))
-            self.vao = self._objects.own(ctx.vertex_array(owner.program, [(owner.uv_vbo, "2f", "in_uv"),
-                                                                          (self.visible, "1u/i", "in_leaf")],
-                                                          index_buffer=owner.ibo, index_element_size=4))
+            self.vao = self._objects.own(record_vertex_array(ctx, owner.program, owner.uv_vbo, self.vertices,
+                                                             LEAF_VERTEX_BLOCK, owner.ibo))
         except BaseException:
             self.release()
             raise
+
+    def use_rows(self) -> None:
+        """Bind what ``leaf.vert`` reads of the rows besides the vertex records (the row texture)."""
+        if self.row_texture is not None:
+            self.row_texture.use()
 
     def release(self) -> None:
         self._objects.release()
@@ -341,6 +405,7 @@ class SceneRenderer:
             self.species_records, table, keys = species_tables(scene)
             self.program = self.resources.leaf_program({"LEAF_INDIRECT": 1, **feature_defines(self.species_records)})
             self.cull = self.resources.programs.compute("scene_cull.comp")
+            self.compact = self.resources.programs.compute("scene_compact.comp")
             self.ripples = self._objects.own(self.resources.ripple_pass())
             self.ripples.update(keys)
             self.jitter = self._objects.own(JitterTable(ctx, table))
@@ -365,6 +430,9 @@ class SceneRenderer:
             self.uv_vbo = self._objects.own(ctx.buffer(np.concatenate(uvs).astype(np.float32).tobytes()))
             self.ibo = self._objects.own(ctx.buffer(np.concatenate(idx).astype(np.uint32).tobytes()))
             self.stems = self._make_stems(scene.stems)
+            # one host array reused for every batch's rows (a 10⁶-leaf scene packs 7 batches)
+            self._host_rows: NDArray[Any] | None = np.empty(max((b - a for a, b in self.plan), default=0),
+                                                                LEAF_BLOCK.dtype)
             for start, stop in self.plan:
                 ensure_alive(ctx, f"uploading leaves {start:,}..{stop:,} of {len(scene):,}")
                 self.batches.append(_SceneBatch(self, start, stop))
@@ -374,56 +442,19 @@ class SceneRenderer:
                                           f"({(stop - start) * LEAF_BLOCK.nbytes:,} bytes of rows)")
                 if progress is not None:
                     progress(stop - start)
+            self._host_rows = None
         except BaseException:
             self.release()
             raise
 
-    def _species_cull(self, records: NDArray[Any], chunk: int = _CULL_CHUNK) -> NDArray[Any]:
-        """:func:`species_cull` of the species ``records`` from the points this renderer's vertex
-        shader computes: identical records are captured once, the others in chunks of ``chunk``
-        (one prepare dispatch and one instanced capture per level each), so a leaf set with a
-        species per leaf costs a few GPU passes, not a numpy evaluation per leaf."""
-        ctx = self.ctx
-        raw = np.ascontiguousarray(records).view(np.dtype((np.void, records.dtype.itemsize))).reshape(-1)
-        _, first, inverse = np.unique(raw, return_index=True, return_inverse=True)
-        unique = np.ascontiguousarray(records[first])
-        # a coarser level whose samples are among the finest level's (the default grids nest) is
-        # read out of the finest capture; only the others are captured themselves
-        subsets = [_nested(self.grids[0], g) for g in self.grids]
-        captured = [k for k, sub in enumerate(subsets) if sub is None or k == 0]
-        per = [self.grids[k][0] * self.grids[k][1] for k in captured]
-        chunk = max(1, min(chunk, self._block_limit // LEAF_BLOCK.nbytes,
-                           MAX_RESOURCE_BYTES // capture_bytes(sum(per))))
-        points: list[list[NDArray[np.float32]]] = [[] for _ in self.grids]
+    def _species_cull(self, records: NDArray[Any]) -> NDArray[Any]:
+        """:func:`species_cull` of the species ``records``, computed on the GPU
+        (:class:`~leafview.gpu.bounds.LeafBounds`: one dispatch evaluates every record at every
+        level's grid with the vertex shader's code; a record costs microseconds there, less than
+        finding duplicates would)."""
         self._bind_tables()
-        for start in range(0, len(unique), chunk):
-            part = unique[start:start + chunk]
-            n = len(part)
-            ensure_alive(ctx, "measuring the species of a scene")
-            local = GLObjects()
-            try:
-                rows = local.own(ctx.buffer(part.tobytes()))
-                self.resources.prepare.run(rows, n)
-                ids = local.own(ctx.buffer(np.arange(n, dtype=np.uint32).tobytes()))
-                with self.resources.capture.recording(n * sum(per)) as rec:
-                    for k in captured:
-                        g = self.resources.grid(*self.grids[k])
-                        vao = local.own(ctx.vertex_array(self.program, [(g.vbo, "2f", "in_uv"),
-                                                                        (ids, "1u/i", "in_leaf")]))
-                        rows.bind_to_storage_buffer(LEAVES_BINDING)
-                        rec.add(vao, g.vertices, instances=n)
-                    pos, _ = rec.read()
-            finally:
-                local.release()
-            offset = 0
-            for k, nverts in zip(captured, per):
-                points[k].append(pos[offset:offset + n * nverts].reshape(n, nverts, 3))
-                offset += n * nverts
-            for k, sub in enumerate(subsets):
-                if k not in captured and sub is not None:
-                    points[k].append(points[0][-1][:, sub])
-        rows_out = cull_rows_from_points([np.concatenate(p) for p in points], self.grids, self.scene.spec.variation)
-        return rows_out[inverse.reshape(-1)]
+        bounds = LeafBounds(self.ctx, self.resources.programs, self.resources.prepare, self.grids)
+        return bounds.run(records, self.scene.spec.variation, feature_defines(records), block_limit=self._block_limit)
 
     def _make_stems(self, stems: Any) -> moderngl.VertexArray | None:
         if stems is None or len(stems[2]) == 0:
@@ -463,9 +494,8 @@ class SceneRenderer:
         if found is None:
             prog = self.resources.leaf_program({"LEAF_INDIRECT": 1, **feature_defines(self.species_records),
                                                 **defines})
-            vaos = [self._objects.own(self.ctx.vertex_array(prog, [(self.uv_vbo, "2f", "in_uv"),
-                                                                   (b.visible, "1u/i", "in_leaf")],
-                                                            index_buffer=self.ibo, index_element_size=4))
+            vaos = [self._objects.own(record_vertex_array(self.ctx, prog, self.uv_vbo, b.vertices, LEAF_VERTEX_BLOCK,
+                                                          self.ibo))
                     for b in self.batches]
             stems = None
             if self._stem_buffers is not None:
@@ -505,8 +535,24 @@ class SceneRenderer:
         batch.commands.bind_to_storage_buffer(COMMANDS_BINDING)
         batch.visible.bind_to_storage_buffer(VISIBLE_BINDING)
         s.run(group_x=-(-batch.count // _LOCAL))
+        self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
+        self._compact(batch.rows, batch.commands, batch.visible, batch.vertices, batch.count, len(self.grids))
+
+    def _compact(self, rows: moderngl.Buffer, commands: moderngl.Buffer, visible: moderngl.Buffer,
+                 vertices: moderngl.Buffer, stride: int, levels: int) -> None:
+        """``scene_compact.comp``: the vertex records of the ``levels`` lists of ``visible`` (level k's
+        from entry ``k · stride``, as many as its command counts), rows read from ``rows``, into
+        ``vertices``; each command's ``baseInstance`` set to its level's first record."""
+        c = self.compact
+        c["stride"] = stride
+        c["levels"] = levels
+        rows.bind_to_storage_buffer(LEAVES_BINDING)
+        commands.bind_to_storage_buffer(COMMANDS_BINDING)
+        visible.bind_to_storage_buffer(VISIBLE_BINDING)
+        vertices.bind_to_storage_buffer(VERTICES_BINDING)
+        c.run(group_x=-(-stride // _LOCAL))
         self.ctx.memory_barrier(moderngl.COMMAND_BARRIER_BIT | moderngl.VERTEX_ATTRIB_ARRAY_BARRIER_BIT
-                                | moderngl.SHADER_STORAGE_BARRIER_BIT)
+                                | moderngl.SHADER_STORAGE_BARRIER_BIT | moderngl.BUFFER_UPDATE_BARRIER_BIT)
 
     def _bind_tables(self) -> None:
         self.frame.bind()
@@ -531,7 +577,7 @@ class SceneRenderer:
         for i, (batch, vao) in enumerate(zip(self.batches, vaos)):
             ensure_alive(self.ctx, f"drawing batch {i + 1} of {len(self.batches)}")
             self._cull(batch)
-            batch.rows.bind_to_storage_buffer(LEAVES_BINDING)
+            batch.use_rows()
             if isinstance(offset, moderngl.Uniform):
                 offset.value = batch.start
             vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=len(self.grids))
@@ -563,7 +609,8 @@ class SceneRenderer:
 
     def capture(self, leaves: Sequence[int], level: int = 0) -> NDArray[np.float32]:
         """Leaf-space positions that ``leaf.vert`` computes for the given leaves at ``level``'s
-        grid (transform feedback of the drawing program, one instanced capture per batch):
+        grid (transform feedback of the drawing program reading the vertex records that
+        ``scene_compact.comp`` writes, one instanced capture per batch):
         (len(leaves), nu·nv, 3). The framebuffer binding is left as it was."""
         picks = np.asarray(list(leaves), dtype=np.int64).reshape(-1)
         if picks.size and (picks.min() < 0 or picks.max() >= len(self.scene)):
@@ -577,14 +624,21 @@ class SceneRenderer:
                 mine = np.flatnonzero((picks >= b.start) & (picks < b.start + b.count))
                 if not mine.size:
                     continue
-                ids = self.ctx.buffer((picks[mine] - b.start).astype(np.uint32).tobytes())
-                vao = self.ctx.vertex_array(self.program, [(grid.vbo, "2f", "in_uv"), (ids, "1u/i", "in_leaf")])
+                # the picks as one level's list, through the same compaction and vertex records as a draw
+                command = np.zeros(1, DRAW_COMMAND_DTYPE)
+                command["instance_count"] = mine.size
+                local = GLObjects()
                 try:
-                    b.rows.bind_to_storage_buffer(LEAVES_BINDING)
+                    ids = local.own(self.ctx.buffer((picks[mine] - b.start).astype(np.uint32).tobytes()))
+                    commands = local.own(self.ctx.buffer(command.tobytes()))
+                    vertices = local.own(self.ctx.buffer(reserve=LEAF_VERTEX_BLOCK.nbytes * mine.size))
+                    self._compact(b.rows, commands, ids, vertices, int(mine.size), 1)
+                    vao = local.own(record_vertex_array(self.ctx, self.program, grid.vbo, vertices,
+                                                        LEAF_VERTEX_BLOCK))
+                    b.use_rows()
                     rec.add(vao, nverts, instances=mine.size)
                 finally:
-                    vao.release()
-                    ids.release()
+                    local.release()
                 order.append(mine)
             pos, _ = rec.read()
         out = np.empty((picks.size, nverts, 3), np.float32)

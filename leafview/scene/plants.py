@@ -48,7 +48,6 @@ from leafview.scene.stems import (
     Nodes,
     Skeleton,
     auto_twigs,
-    cross,
     divergence,
     grow_skeleton,
     merge_meshes,
@@ -246,14 +245,19 @@ def _unit(v: NDArray[np.float64]) -> NDArray[np.float64]:
     return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-12)
 
 
-def _dot(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.einsum("...i,...i->...", a, b)
+# _orient works on (3, N) arrays, one contiguous row per component: every step is a few passes
+# over contiguous memory (10⁶ leaves in a field), without (N, 3) temporaries or strided columns
+def _cross_rows(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Cross products of the columns of (3, N) arrays (``b`` may be a (3, 1) constant)."""
+    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
-def _rotate(v: NDArray[np.float64], axis: NDArray[np.float64], angle: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Rodrigues rotation of the rows of ``v`` about the unit rows of ``axis`` by ``angle``."""
-    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
-    return v * c + cross(axis, v) * s + axis * _dot(axis, v)[:, None] * (1.0 - c)
+def _rotate_rows(v: NDArray[np.float64], axis: NDArray[np.float64], c: NDArray[np.float64],
+                 s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Rodrigues rotation of the columns of ``v`` about the unit columns of ``axis`` by the angles
+    whose cosines and sines are ``c`` and ``s`` (all (3, N) or (N,))."""
+    k = (axis * v).sum(axis=0) * (1.0 - c)
+    return v * c + _cross_rows(axis, v) * s + axis * k
 
 
 def _orient(spec: PlantSpec, lv: Nodes, size: NDArray[np.float64], rel_height: NDArray[np.float64],
@@ -261,40 +265,44 @@ def _orient(spec: PlantSpec, lv: Nodes, size: NDArray[np.float64], rel_height: N
     """Rotation (N, 3, 3) of every blade: columns are the world directions of leaf x (width),
     y (base to apex) and z (upper side)."""
     n = len(size)
-    horiz = lv.out.copy()
-    horiz[:, 2] = 0.0
+    hx, hy = lv.out[:, 0].copy(), lv.out[:, 1].copy()      # the petiole's horizontal direction
     for fallback in (lv.normal, np.array([1.0, 0.0, 0.0])):      # petiole (nearly) vertical
-        weak = np.linalg.norm(horiz, axis=1) < 1e-6
+        weak = np.hypot(hx, hy) < 1e-6
         if not weak.any():
             break
-        alt = np.broadcast_to(fallback, lv.out.shape)[weak].copy()
-        alt[:, 2] = 0.0
-        horiz[weak] = alt
-    weak = np.linalg.norm(horiz, axis=1) < 1e-6
-    horiz[weak] = (1.0, 0.0, 0.0)
-    horiz = _unit(horiz)
+        alt = np.broadcast_to(fallback, lv.out.shape)[weak]
+        hx[weak], hy[weak] = alt[:, 0], alt[:, 1]
+    weak = np.hypot(hx, hy) < 1e-6
+    hx[weak], hy[weak] = 1.0, 0.0
     jit = np.radians(spec.leaf_jitter) * rng.uniform(-1.0, 1.0, (n, 3))
-    yaw = np.arctan2(horiz[:, 1], horiz[:, 0]) + jit[:, 0]
-    elev = np.radians(spec.tilt + (spec.tilt_top - spec.tilt) * rel_height) + jit[:, 1]
-    h = np.stack([np.cos(yaw), np.sin(yaw), np.zeros(n)], axis=1)
-    y = np.cos(elev)[:, None] * h + np.sin(elev)[:, None] * _Z
-    x = cross(h, _Z)                                           # horizontal, x × y = normal up
-    x = _rotate(x, y, jit[:, 2])                                  # roll about the midrib
-    z = cross(x, y)
+    yaw = np.arctan2(hy, hx)
+    yaw += jit[:, 0]
+    elev = np.radians(spec.tilt + (spec.tilt_top - spec.tilt) * rel_height)
+    elev += jit[:, 1]
+    cy, sy, ce, se = np.cos(yaw), np.sin(yaw), np.cos(elev), np.sin(elev)
+    # y = cos(elev) h + sin(elev) ẑ with h = (cos yaw, sin yaw, 0); x = h × ẑ = (sin yaw, -cos yaw, 0)
+    # (horizontal, x × y = normal up), rolled about y by the third jitter angle: x ⊥ y, so
+    # x' = x cos r + (y × x) sin r with y × x = (sin(elev) cos yaw, sin(elev) sin yaw, -cos(elev))
+    y = np.stack([ce * cy, ce * sy, se])
+    cr, sr = np.cos(jit[:, 2]), np.sin(jit[:, 2])
+    x = np.stack([sy * cr + se * cy * sr, se * sy * sr - cy * cr, -ce * sr])
+    z = _cross_rows(x, y)
     f = spec.light_following
     if f > 0:
-        light = _unit(np.asarray(spec.light, np.float64))
-        cos_a = np.clip(z @ light, -1.0, 1.0)
-        axis = cross(z, light)
-        na = np.linalg.norm(axis, axis=1)
+        light = _unit(np.asarray(spec.light, np.float64))[:, None]
+        cos_a = np.clip((z * light).sum(axis=0), -1.0, 1.0)
+        axis = _cross_rows(z, light)
+        na = np.sqrt((axis * axis).sum(axis=0))
         flip = na < 1e-9                                          # parallel or opposite
-        axis[flip] = x[flip]
-        axis = _unit(axis)
+        axis[:, flip] = x[:, flip]
+        na[flip] = np.sqrt((x[:, flip] ** 2).sum(axis=0))
+        axis /= np.maximum(na, 1e-12)
         ang = f * np.arccos(cos_a)
         ang[flip & (cos_a > 0)] = 0.0
-        x, y = _rotate(x, axis, ang), _rotate(y, axis, ang)
-        z = cross(x, y)
-    return np.stack([x, y, z], axis=2)
+        c, s = np.cos(ang), np.sin(ang)
+        x, y = _rotate_rows(x, axis, c, s), _rotate_rows(y, axis, c, s)
+        z = _cross_rows(x, y)
+    return np.stack([x, y, z], axis=1).transpose(2, 0, 1)     # (N, component, column)
 
 
 def _blade_low(m: NDArray[np.float64]) -> NDArray[np.float64]:
