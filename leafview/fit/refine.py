@@ -45,13 +45,18 @@ Choices where the paper leaves room, each measured on the cluttered synthetic sc
 * **What is left over.** The points of a candidate that its template did not take (the other
   leaf of a conjoined pair) form a new candidate, queued by its own confidence and size, when
   they are at least ``min_points``.
+
+After the refinement, :func:`touching` finds the refined leaves that would join under eqs 7-8
+if they were superpixels (their planes agree and their points touch), and :func:`joined` makes
+one leaf of two: :func:`leafview.fit.capture.capture` uses them to put back together a leaf that
+the templates of several views took in pieces.
 """
 
 from __future__ import annotations
 
 import heapq
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,10 +66,11 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from leafview.errors import ParamError
-from leafview.fit.segment import Candidate, measure
+from leafview.fit.segment import SIGMA, THRESHOLD, Candidate, affinity, measure
 from leafview.fit.views import View
 
-__all__ = ["ScenePoints", "Refined", "template", "similarity", "ellipse_samples", "icp", "icp_refine", "TOP", "BINS",
+__all__ = ["ScenePoints", "Refined", "template", "similarity", "ellipse_samples", "icp", "icp_refine", "touching",
+           "joined", "TOP", "BINS",
            "ICP_ITERATIONS", "ICP_TARGET_POINTS", "MARGIN", "CONNECT", "MERGE_CONFIDENCE", "SPREAD", "DUPLICATE",
            "NOT_PLANE", "TOO_FEW"]
 
@@ -405,3 +411,60 @@ _HALF_NEIGHBOURS = [(dx, dy, dz) for dx in (-1, 0, 1) for dy in (-1, 0, 1) for d
 def _note(skipped: list[tuple[str, Candidate]] | None, reason: str, c: Candidate) -> None:
     if skipped is not None:
         skipped.append((reason, c))
+
+
+def touching(leaves: Sequence[Refined | None], delta_plane: float, among: Collection[int],
+             changed: Collection[int] | None = None) -> list[tuple[int, int]]:
+    """Pairs ``(i, j)``, ``i < j``, of the leaves indexed by ``among`` (None entries skipped) that
+    eqs 7-8 would join were they two superpixels: ``d_n = 1 - |n̂_i · n̂_j|`` of their planes (the
+    normals may face different cameras, hence the absolute value) and ``d_p`` the smallest
+    distance between a point of one and a point of the other over ``delta_plane``, with affinity
+    at least :data:`~leafview.fit.segment.THRESHOLD`. With ``changed``, only pairs holding at least
+    one of those leaves (the others were looked at before)."""
+    got: dict[int, Refined] = {}
+    for k in sorted(set(among)):
+        r = leaves[k]
+        if r is not None:
+            got[k] = r
+    reach = delta_plane * math.sqrt(-2.0 * SIGMA * SIGMA * math.log(THRESHOLD))    # d_p beyond this cannot join
+    radius = {k: float(np.max(np.linalg.norm(r.points - r.centre, axis=1))) for k, r in got.items()}
+    trees: dict[int, cKDTree] = {}
+    fresh = None if changed is None else set(changed)
+    keys = list(got)
+    out = []
+    for a, i in enumerate(keys):
+        for j in keys[a + 1:]:
+            if fresh is not None and i not in fresh and j not in fresh:
+                continue
+            ri, rj = got[i], got[j]
+            if float(np.linalg.norm(ri.centre - rj.centre)) > radius[i] + radius[j] + reach:
+                continue
+            d_n = 1.0 - abs(float(ri.normal @ rj.normal))
+            if float(affinity(d_n, 0.0)) < THRESHOLD:
+                continue
+            big, small = (j, i) if len(ri.points) <= len(rj.points) else (i, j)
+            if big not in trees:
+                trees[big] = cKDTree(got[big].points)
+            dist, _ = trees[big].query(got[small].points, distance_upper_bound=reach)
+            gap = float(dist.min())
+            if math.isfinite(gap) and float(affinity(d_n, gap / delta_plane)) >= THRESHOLD:
+                out.append((i, j))
+    return out
+
+
+def joined(a: Refined, b: Refined) -> Refined | None:
+    """One leaf of the points of ``a`` and ``b`` (disjoint scene rows): its plane and enclosing
+    ellipse measured again (:func:`leafview.fit.segment.measure`; ``confidence`` is the union's
+    coverage of it), and the camera, view and candidate of the one with more points. None when the
+    union spans no plane."""
+    big = a if len(a.indices) >= len(b.indices) else b
+    rows = np.concatenate([a.indices, b.indices])
+    order = np.argsort(rows, kind="stable")
+    points = np.concatenate([a.points, b.points])[order]
+    geo = measure(points, big.eye)
+    if geo is None:
+        return None
+    normal, centre, major, minor, length, width, conf = geo
+    return Refined(rows[order], points, np.concatenate([a.view, b.view])[order],
+                   np.concatenate([a.pixel, b.pixel])[order], centre, major, minor, normal, length / 2.0, width / 2.0,
+                   big.eye, big.source_view, big.candidate, conf, big.coverage, big.iterations)
