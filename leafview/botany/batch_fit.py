@@ -70,7 +70,8 @@ from leafview.core.defaults import INSTANCE_FIT_TARGET
 from leafview.core.params import MAX_SILHOUETTE_ROWS, LeafParams, ParamError
 
 __all__ = ["BatchFit", "fit_outlines", "fit_landmark_leaves", "fit_sides", "minimax_sides", "elevate",
-           "controls_from_params", "outline_errors", "jacobian_grids", "split_outlines", "DEFAULT_BATCH_TARGET"]
+           "controls_from_params", "outline_errors", "jacobian_grids", "split_outlines", "fit_inputs",
+           "DEFAULT_BATCH_TARGET"]
 
 DEFAULT_BATCH_TARGET = INSTANCE_FIT_TARGET
 _SAMPLES = 80                 # samples per side in the fit (as fit_outline)
@@ -588,6 +589,39 @@ def outline_errors(ctrl: Sequence[NDArray[np.float64]] | NDArray[np.float64], ri
 
 
 # -- the batch fit ----------------------------------------------------------------------------------
+def fit_inputs(outlines: ArrayLike | None, right: ArrayLike | None, left: ArrayLike | None, target: float,
+               min_rows: int, max_rows: int, names: Sequence[str] | None, *, same_shape: bool = False
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64], list[str]]:
+    """The checked arguments of a batch fit (:func:`fit_outlines` and the quick fit): right and
+    left sides (B, K, 2) and B names. ``same_shape``: the left sides must have the right sides'
+    shape (not only their count). Raises :class:`ParamError` naming the argument."""
+    if outlines is not None:
+        if right is not None or left is not None:
+            raise ParamError("outlines", "give outlines or right/left sides, not both")
+        r, lt = _split_batch(_as_batch(outlines, "outlines", 6))
+    elif right is not None:
+        r = _as_batch(right, "right", 3)
+        lt = r * [-1.0, 1.0] if left is None else _as_batch(left, "left", 3)
+        if same_shape and lt.shape != r.shape:
+            raise ParamError("left", f"expected {r.shape} like the right sides, got {lt.shape}")
+        if len(lt) != len(r):
+            raise ParamError("left", f"expected {len(r)} left sides, got {len(lt)}")
+        _check_ends(r, "right")
+        _check_ends(lt, "left")
+    else:
+        raise ParamError("outlines", "give outlines or their right sides")
+    if not (isinstance(target, (int, float)) and np.isfinite(target) and target > 0.0):
+        raise ParamError("target", f"must be a positive number, got {target!r}")
+    if not 3 <= min_rows <= max_rows <= MAX_SILHOUETTE_ROWS:
+        raise ParamError("max_rows", f"rows must satisfy 3 <= {min_rows} <= {max_rows} <= {MAX_SILHOUETTE_ROWS}")
+    if names is None:
+        names = [""] * len(r)
+    elif len(names) != len(r):
+        raise ParamError("names", f"expected {len(r)} names, got {len(names)}")
+    return r, lt, list(names)
+
+
+
 def fit_outlines(outlines: ArrayLike | None = None, *, right: ArrayLike | None = None, left: ArrayLike | None = None,
                  target: float = DEFAULT_BATCH_TARGET, min_rows: int = 3, max_rows: int = MAX_SILHOUETTE_ROWS,
                  fallback: bool = True, names: Sequence[str] | None = None) -> BatchFit:
@@ -618,28 +652,8 @@ def fit_outlines(outlines: ArrayLike | None = None, *, right: ArrayLike | None =
     BatchFit
     """
     t0 = time.perf_counter()
-    if outlines is not None:
-        if right is not None or left is not None:
-            raise ParamError("outlines", "give outlines or right/left sides, not both")
-        r, lt = _split_batch(_as_batch(outlines, "outlines", 6))
-    elif right is not None:
-        r = _as_batch(right, "right", 3)
-        lt = r * [-1.0, 1.0] if left is None else _as_batch(left, "left", 3)
-        if len(lt) != len(r):
-            raise ParamError("left", f"expected {len(r)} left sides, got {len(lt)}")
-        _check_ends(r, "right")
-        _check_ends(lt, "left")
-    else:
-        raise ParamError("outlines", "give outlines or their right sides")
-    if not (isinstance(target, (int, float)) and np.isfinite(target) and target > 0.0):
-        raise ParamError("target", f"must be a positive number, got {target!r}")
-    if not 3 <= min_rows <= max_rows <= MAX_SILHOUETTE_ROWS:
-        raise ParamError("max_rows", f"rows must satisfy 3 <= {min_rows} <= {max_rows} <= {MAX_SILHOUETTE_ROWS}")
+    r, lt, names = fit_inputs(outlines, right, left, target, min_rows, max_rows, names)
     b = len(r)
-    if names is None:
-        names = [""] * b
-    elif len(names) != b:
-        raise ParamError("names", f"expected {b} names, got {len(names)}")
 
     meter = _ErrorMeter(r, lt)
     mean = 0.5 * (_resample(r, _MEAN_SAMPLES) + _resample(lt * [-1.0, 1.0], _MEAN_SAMPLES))

@@ -50,13 +50,12 @@ from leafview.botany.batch_fit import (
     DEFAULT_BATCH_TARGET,
     BatchFit,
     _as_batch,
-    _check_ends,
     _fold_cost,
     _jacobian_parts,
     _resample,
-    _split_batch,
     _with_ends,
     elevate,
+    fit_inputs,
     jacobian_grids,
 )
 from leafview.botany.outline_fit import _FOLD_MARGIN, _FOLD_WEIGHT, _JAC_S, params_from_controls
@@ -440,28 +439,8 @@ def quick_fit_outlines(outlines: ArrayLike | None = None, *, right: ArrayLike | 
         call it to check); ``fallback`` is all False.
     """
     t0 = time.perf_counter()
-    if outlines is not None:
-        if right is not None or left is not None:
-            raise ParamError("outlines", "give outlines or right/left sides, not both")
-        r, lt = _split_batch(_as_batch(outlines, "outlines", 6))
-    elif right is not None:
-        r = _as_batch(right, "right", 3)
-        lt = r * [-1.0, 1.0] if left is None else _as_batch(left, "left", 3)
-        if lt.shape != r.shape:
-            raise ParamError("left", f"expected {r.shape} like the right sides, got {lt.shape}")
-        _check_ends(r, "right")
-        _check_ends(lt, "left")
-    else:
-        raise ParamError("outlines", "give outlines or their right sides")
-    if not (isinstance(target, (int, float)) and np.isfinite(target) and target > 0.0):
-        raise ParamError("target", f"must be a positive number, got {target!r}")
-    if not 3 <= min_rows <= max_rows <= MAX_SILHOUETTE_ROWS:
-        raise ParamError("max_rows", f"rows must satisfy 3 <= {min_rows} <= {max_rows} <= {MAX_SILHOUETTE_ROWS}")
+    r, lt, names = fit_inputs(outlines, right, left, target, min_rows, max_rows, names, same_shape=True)
     b = len(r)
-    if names is None:
-        names = [""] * b
-    elif len(names) != b:
-        raise ParamError("names", f"expected {b} names, got {len(names)}")
 
     mirrored = lt * [-1.0, 1.0]
     sym = np.all(np.abs(mirrored - r) <= 1e-12, axis=(1, 2))
