@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from leafview.cli import main
-from leafview.core.params import LeafParams
+from leafview.core.params import LeafParams, Transform
 from leafview.export.images import PARAMS_ATTRIBUTE, read_image
 from leafview.resources import builtin_presets
 
@@ -204,3 +204,17 @@ def test_a_control_character_in_a_key_stays_escaped_in_one_line(tmp_path, monkey
     assert "\u2028" not in err and "\x1b" not in err
     assert key.encode("unicode_escape").decode() in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.json"]
+
+
+@pytest.mark.parametrize("extra", [[], ["--sheet", "--format", "png"]])
+def test_render_refuses_a_leaf_too_far_to_frame_naming_the_file(tmp_path, capsys, extra):
+    """A leaf 1 long at 10⁵ from the origin cannot be resolved in 32 bits: exit 2, one line naming
+    the file, the leaf and the field, and nothing written (found by the CLI fuzz run)."""
+    leaf = LeafParams.load(builtin_presets()["ovate"])
+    src = tmp_path / "far.toml"
+    leaf.replace(name="far", transform=Transform(translation=(1e5, 0.0, 0.0))).save(src)
+    out = tmp_path / "out" / "far.png"
+    assert main(["render", str(src), "-o", str(out), "--size", "8", *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(src) in err and "transform" in err and "leaf far" in err, err
+    assert not out.exists()

@@ -20,13 +20,13 @@ from leafview.atomic import UniqueNames, check_folder, check_target
 from leafview.core.io import load_leaves
 from leafview.core.limits import MAX_GRID, MAX_IMAGE_SIDE, parse_count
 from leafview.core.params import LeafParams
-from leafview.errors import UsageError
+from leafview.errors import ParamError, UsageError
 from leafview.resources import builtin_presets, resolve_preset
-from leafview.scene.camera import VIEWS
+from leafview.scene.camera import VIEWS, check_leaf_framable
 
 __all__ = ["EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_INTERRUPTED", "VIEWS", "count", "int_in_range", "int_pair",
            "pixels", "image_size", "output_path", "window_size", "grid", "builtin_names", "expand_presets",
-           "preset_file", "load_leaf_files", "refuse_directory", "output_directory", "output_names", "report", "progress_bar"]
+           "preset_file", "load_leaf_files", "load_framable_leaves", "refuse_directory", "output_directory", "output_names", "report", "progress_bar"]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 EXIT_INTERRUPTED = 130   # Ctrl-C, as a shell reports SIGINT
@@ -134,6 +134,21 @@ def load_leaf_files(paths: Sequence[Path]) -> list[LeafParams]:
     """Every leaf of the given files, in order: a leaf set (``*.leaves.json``) gives all of its
     leaves, any other preset file one. Each leaf is named (its file's stem when unnamed)."""
     return [leaf for path in paths for leaf in load_leaves(path)]
+
+
+def load_framable_leaves(paths: Sequence[Path]) -> list[LeafParams]:
+    """:func:`load_leaf_files`, each leaf checked by
+    :func:`~leafview.scene.camera.check_leaf_framable` (finite, and within what 32-bit rendering
+    can frame); a refusal names the file as well as the leaf and the field."""
+    leaves: list[LeafParams] = []
+    for path in paths:
+        for leaf in load_leaves(path):
+            try:
+                check_leaf_framable(leaf)
+            except ParamError as exc:
+                raise exc.with_source(str(path)) from None
+            leaves.append(leaf)
+    return leaves
 
 
 # -- outputs ------------------------------------------------------------------------------------

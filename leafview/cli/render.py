@@ -27,7 +27,7 @@ from leafview.cli.args import (
     count,
     expand_presets,
     grid,
-    load_leaf_files,
+    load_framable_leaves,
     output_directory,
     output_names,
     output_path,
@@ -51,7 +51,7 @@ from leafview.export.views import (
 )
 from leafview.gpu import default_renderer
 from leafview.gpu.renderer import BATCH
-from leafview.scene.camera import MAX_RING_ELEVATION, RING_ELEVATIONS, check_leaf_framable
+from leafview.scene.camera import MAX_RING_ELEVATION, RING_ELEVATIONS
 from leafview.scene.spec import Scene, scene_from_leaves
 
 __all__ = ["add_arguments", "run", "add_views_arguments", "check_views_arguments", "write_views"]
@@ -223,9 +223,7 @@ def _run_views(args: argparse.Namespace) -> int:
     if len(args.presets) != 1:
         raise UsageError(f"--views draws one leaf or one leaf set: give one PRESET, not {len(args.presets)}")
     path = preset_file(args.presets[0])
-    leaves = load_leaf_files([path])
-    for leaf in leaves:
-        check_leaf_framable(leaf)
+    leaves = load_framable_leaves([path])
     scene = scene_from_leaves(leaves, name=path.name)
     write_views(args, scene, size=(args.size, args.size), seed=args.views_seed or 0, grid=args.grid or VIEW_GRID)
     return EXIT_OK
@@ -237,9 +235,9 @@ def run(args: argparse.Namespace) -> int:
         return _run_views(args)
     check_views_arguments(args, {})
     args.view = args.view or DEFAULT_VIEW
-    leaves = load_leaf_files(expand_presets(args.presets))  # validate everything before writing anything
-    for leaf in leaves:
-        check_leaf_framable(leaf)   # finite and within what float32 can frame, or exit 2 naming the leaf
+    # validate everything before writing anything: finite and within what float32 can frame, or exit 2
+    # naming the file, the leaf and the field
+    leaves = load_framable_leaves(expand_presets(args.presets))
     mode, out, fmt = _plan(args, len(leaves))
     names = [leaf.name for leaf in leaves]
     # one safe, unique file name per leaf: never outside -o DIR, never one over another
