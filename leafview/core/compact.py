@@ -52,7 +52,7 @@ __all__ = ["COMPACT_VERSION", "OPTIONAL_GROUPS", "compact_dict", "dumps", "dumps
 
 COMPACT_VERSION = 1
 OPTIONAL_GROUPS = ("jitter", "material", "transform", "ripple", "bending")
-_LEAF_KEYS = ("name", "omega", "half", *OPTIONAL_GROUPS)
+_LEAF_KEYS = ("name", "omega", "half", *OPTIONAL_GROUPS, "texture")
 
 
 # -- numbers ------------------------------------------------------------------------------
@@ -116,6 +116,8 @@ def compact_dict(params: LeafParams, *, digits: int | None = None, version: bool
         kept = {k: _map_floats(v, digits) for k, v in full[group].items() if v != default[group][k]}
         if kept:
             out[group] = kept
+    if params.texture is not None:
+        out["texture"] = params.texture.to_dict()
     return out
 
 
@@ -204,7 +206,7 @@ def parse_compact(doc: Any, *, where: str = "", version: bool = True) -> LeafPar
         full: dict[str, Any] = {"schema": SCHEMA_VERSION, "shape": shape}
         if "name" in doc:
             full["name"] = doc["name"]
-        for group in OPTIONAL_GROUPS:
+        for group in (*OPTIONAL_GROUPS, "texture"):
             if group in doc:
                 full[group] = doc[group]
         try:

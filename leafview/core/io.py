@@ -18,6 +18,7 @@ import tomli_w
 from leafview.atomic import write_text
 from leafview.core import compact
 from leafview.core.params import LeafParams, ParamError, parse_params, register_file_io
+from leafview.core.texture import with_folder
 from leafview.inputs import parse_json, parse_toml, read_text
 
 __all__ = ["load_params", "save_params", "dumps_toml", "read_document", "load_leaves", "save_leaves",
@@ -82,11 +83,24 @@ def leaves_from_document(data: Any, path: str | os.PathLike[str]) -> list[LeafPa
     try:
         if _is_leaf_set(data):
             leaves = compact.parse_leaves(data)
-            return [leaf if leaf.name else leaf.replace(name=f"{_stem(p)}-{i}") for i, leaf in enumerate(leaves)]
-        params = compact.parse_compact(data) if compact.is_compact(data) else parse_params(data)
+            named = [leaf if leaf.name else leaf.replace(name=f"{_stem(p)}-{i}") for i, leaf in enumerate(leaves)]
+        else:
+            params = compact.parse_compact(data) if compact.is_compact(data) else parse_params(data)
+            named = [params if params.name else params.replace(name=_stem(p))]
+        return [_in_folder(leaf, p.parent) for leaf in named]
     except ParamError as exc:
         raise exc.with_source(str(p)) from None
-    return [params if params.name else params.replace(name=_stem(p))]
+
+
+def _in_folder(leaf: LeafParams, folder: Path) -> LeafParams:
+    """``leaf`` with its texture paths resolving against ``folder`` (the leaf file's), checked not
+    to leave it once symbolic links are followed."""
+    if leaf.texture is None:
+        return leaf
+    texture = with_folder(leaf.texture, folder)
+    assert texture is not None
+    texture.paths()
+    return leaf.replace(texture=texture)
 
 
 def load_leaves(path: str | os.PathLike[str]) -> list[LeafParams]:

@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 from leafview.core.bezier import derivative_points, evaluate_curve
 from leafview.core.display import png_of
 from leafview.core.limits import MAX_SILHOUETTE_ROWS, check_name
+from leafview.core.texture import LeafTexture, parse_texture
 from leafview.errors import ParamError
 
 __all__ = [
@@ -291,6 +292,7 @@ class LeafParams:
     ripple: Ripple = field(default_factory=Ripple)
     bending: Bending = field(default_factory=Bending)
     name: str = ""
+    texture: LeafTexture | None = None   # front/back images addressed by (u, v) (leafview.core.texture)
 
     # -- Ω as a flat vector -------------------------------------------------------------------
     def to_vector(self) -> NDArray[np.float64]:
@@ -321,6 +323,8 @@ class LeafParams:
         for group in _GROUPS:
             obj = getattr(self, group)
             out[group] = {f.name: _plain(getattr(obj, f.name)) for f in fields(obj)}
+        if self.texture is not None:
+            out["texture"] = self.texture.to_dict()
         return out
 
     @classmethod
@@ -408,7 +412,7 @@ def field_specs() -> dict[str, FieldSpec]:
 # validation
 _GROUPS: dict[str, type] = {"shape": Shape, "jitter": Jitter, "material": Material, "transform": Transform,
                              "ripple": Ripple, "bending": Bending}
-_TOP_KEYS = {"schema", "name", *_GROUPS}
+_TOP_KEYS = {"schema", "name", "texture", *_GROUPS}
 
 
 def _plain(value: Any) -> Any:
@@ -563,4 +567,5 @@ def parse_params(data: Any) -> LeafParams:
         raise ParamError("shape", "missing table")
     groups = {g: _parse_group(cls, data[g], g, required=(g == "shape"))
               for g, cls in _GROUPS.items() if g in data}
-    return LeafParams(name=name, **groups)
+    texture = parse_texture(data["texture"]) if "texture" in data else None
+    return LeafParams(name=name, texture=texture, **groups)

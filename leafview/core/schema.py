@@ -33,6 +33,7 @@ from typing import Any
 from leafview.core import params as P
 from leafview.core.compact import COMPACT_VERSION, OPTIONAL_GROUPS
 from leafview.core.limits import MAX_NAME_CHARS
+from leafview.core.texture import MAX_TEXTURE_PATH
 
 __all__ = ["SCHEMA_ID", "DIALECT", "compact_schema", "compact_leaf_schema", "doc_line", "leaf_schema"]
 
@@ -44,7 +45,7 @@ def _groups() -> dict[str, type]:
     """Group name -> dataclass, in LeafParams field order."""
     out: dict[str, type] = {}
     for f in fields(P.LeafParams):
-        if f.name != "name":
+        if f.name not in ("name", "texture"):
             if f.default_factory is MISSING:
                 raise TypeError(f"LeafParams.{f.name} is a group without a default factory")
             out[f.name] = type(f.default_factory())
@@ -121,6 +122,19 @@ def doc_line(cls: type) -> str:
     return " ".join(text.split())
 
 
+def _texture_schema() -> dict[str, Any]:
+    """The ``texture`` table (:mod:`leafview.core.texture`): relative image paths."""
+    path = {"type": "string", "minLength": 1, "maxLength": MAX_TEXTURE_PATH,
+            "pattern": r"^(?!/)(?![A-Za-z]:)(?!.*\\)(?!(.*/)?\.{1,2}(/|$))(?!.*//)[^\x00-\x1f\x7f]+"
+                       r"\.([Pp][Nn][Gg]|[Jj][Pp][Ee]?[Gg]|[Tt][Ii][Ff][Ff]?|[Ee][Xx][Rr])$"}
+    return {"type": "object",
+            "description": ("Image textures addressed by the leaf's (u, v): paths relative to the leaf file's "
+                            "folder, which they may not leave (PNG, JPEG, TIFF, OpenEXR)."),
+            "properties": {"front": {**path, "description": "the front (upper side) image"},
+                           "back": {**path, "description": "the back (lower side) image; the front one when absent"}},
+            "required": ["front"], "additionalProperties": False}
+
+
 def leaf_schema() -> dict[str, Any]:
     """The JSON Schema (draft 2020-12) of a leaf parameter document."""
     specs = P.field_specs()
@@ -150,6 +164,7 @@ def leaf_schema() -> dict[str, Any]:
                                                 **{k: {"minItems": n, "maxItems": n} for k in per_row}}}
                                 for n in range(3, _max_rows() + 1)]
         props[group] = gschema
+    props["texture"] = _texture_schema()
     return {
         "$schema": DIALECT,
         "$id": SCHEMA_ID,
@@ -203,6 +218,7 @@ def compact_leaf_schema(version: str) -> dict[str, Any]:
     props["omega"] = {"$ref": "#/$defs/omega"}
     props["half"] = {"title": specs["shape.half"].label, **_field(specs["shape.half"]),
                      "description": "only for a one-sided leaf; absent means both halves (0)"}
+    props["texture"] = full["texture"]
     for group in OPTIONAL_GROUPS:
         g = copy.deepcopy(full[group])
         g.pop("required", None)
