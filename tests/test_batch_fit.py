@@ -83,6 +83,9 @@ def test_jacobian_grids_and_fold_gradient():
     grids = bf.jacobian_grids(bf._with_ends(inner))
     for k in range(5):
         np.testing.assert_allclose(grids[k], _jacobian_grid(bf._with_ends(inner)[k]), atol=1e-14)
+    # the ragged form (polygons of different degrees) gives each polygon's own minimum
+    ragged = [bf._with_ends(inner)[0], bf._with_ends(inner[1:2, :3])[0], bf._with_ends(inner)[2]]
+    np.testing.assert_array_equal(bf.min_jacobians(ragged), [_jacobian_grid(c).min() for c in ragged])
     value, grad = bf._fold_terms(inner)
     h = 1e-7
     flat = inner.reshape(5, -1)

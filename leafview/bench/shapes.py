@@ -43,10 +43,10 @@ import numpy as np
 
 from leafview.bench import PAPER_LEAVES_PER_S
 from leafview.bench.timing import bench_context, gl_info, median_time
-from leafview.botany.batch_fit import controls_from_params, fit_outlines, outline_errors, split_outlines
+from leafview.botany.batch_fit import controls_from_params, fit_outlines, min_jacobians, outline_errors, split_outlines
 from leafview.botany.catalogue import catalogue_names, landmark_leaf, random_instance
 from leafview.botany.landmarks import outline, outlines
-from leafview.botany.outline_fit import _jacobian_grid, fit_outline
+from leafview.botany.outline_fit import fit_outline
 from leafview.botany.quick_fit import quick_fit_outlines
 from leafview.botany.shapes import INSTANCE_TARGET, fit_instances, shapes_params
 from leafview.core.params import LeafParams, Transform
@@ -163,7 +163,7 @@ def _landmark_rates(ctx: moderngl.Context, res: dict[str, Any], quick: bool) -> 
             right, left = split_outlines(rings)
             ctrl = controls_from_params(fitted)
             measured = outline_errors(ctrl, right, left)[:, 0]
-            min_jacobian = np.array([_jacobian_grid(np.asarray(c)).min() for c in ctrl])
+            min_jacobian = min_jacobians(ctrl)
             res.update(_error_figures("landmark_fit", measured, min_jacobian, [p.shape.rows for p in fitted]))
             # the quick fit alone (untimed here): its own bound against the measured error
             alone = quick_fit_outlines(rings, target=INSTANCE_TARGET, names=names_now)

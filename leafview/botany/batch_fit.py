@@ -60,7 +60,6 @@ from leafview.botany.outline_fit import (
     _JAC_V,
     _densify,
     _feet_rows,
-    _jacobian_grid,
     fit_outline,
     params_from_controls,
 )
@@ -70,7 +69,7 @@ from leafview.core.defaults import INSTANCE_FIT_TARGET
 from leafview.core.params import MAX_SILHOUETTE_ROWS, LeafParams, ParamError
 
 __all__ = ["BatchFit", "fit_outlines", "fit_landmark_leaves", "fit_sides", "minimax_sides", "elevate",
-           "controls_from_params", "outline_errors", "jacobian_grids", "split_outlines", "fit_inputs",
+           "controls_from_params", "outline_errors", "jacobian_grids", "min_jacobians", "split_outlines", "fit_inputs",
            "DEFAULT_BATCH_TARGET"]
 
 DEFAULT_BATCH_TARGET = INSTANCE_FIT_TARGET
@@ -304,6 +303,18 @@ def jacobian_grids(ctrl: NDArray[np.float64]) -> NDArray[np.float64]:
     (which it equals leaf by leaf); used for the fold penalty inside the Gauss-Newton rounds."""
     parts = _jacobian_parts(ctrl)
     return parts["det"] / parts["scale"][:, None, None]
+
+
+def min_jacobians(ctrl: Sequence[NDArray[np.float64]] | NDArray[np.float64]) -> NDArray[np.float64]:
+    """(B,) the smallest normalised Jacobian determinant of eq. 6 over the fold grid of each
+    control polygon (each (n + 1, 2); the polygons may differ in n): > 0 where the blade does not
+    fold. The one fold measure of the fits and the benchmarks."""
+    out = np.empty(len(ctrl), dtype=np.float64)
+    sizes = np.array([len(c) for c in ctrl], dtype=np.int64)
+    for n in np.unique(sizes):
+        which = np.flatnonzero(sizes == n)
+        out[which] = jacobian_grids(np.stack([np.asarray(ctrl[int(i)], np.float64) for i in which])).min(axis=(1, 2))
+    return out
 
 
 def _fold_terms(inner: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -669,7 +680,7 @@ def fit_outlines(outlines: ArrayLike | None = None, *, right: ArrayLike | None =
         best so far (no fold first, then the smaller error); True where it meets the target."""
         fitted = params_from_controls(ctrl, [names[int(i)] for i in todo])
         err = meter(controls_from_params(fitted), todo)
-        jmin = np.array([float(_jacobian_grid(c).min()) for c in ctrl])
+        jmin = min_jacobians(ctrl)
         for k, i in enumerate(todo):
             if params[i] is None or (jmin[k] > 0.0, -err[k, 0]) > (jac[i] > 0.0, -errors[i, 0]):
                 params[i], errors[i], jac[i], rows[i] = fitted[k], err[k], jmin[k], n_rows
@@ -696,7 +707,7 @@ def fit_outlines(outlines: ArrayLike | None = None, *, right: ArrayLike | None =
         for i in todo:
             fit = fit_outline(right=r[i], left=lt[i], target=target, min_rows=min_rows, max_rows=max_rows, name=names[int(i)])
             c = controls_from_params([fit.params])[0]
-            j = float(_jacobian_grid(c).min())
+            j = float(min_jacobians([c])[0])
             if (j > 0.0, -fit.error) > (jac[i] > 0.0, -errors[i, 0]):
                 params[i], errors[i], jac[i], rows[i] = fit.params, (fit.error, *fit.error_sides), j, fit.rows
             used[i] = True
