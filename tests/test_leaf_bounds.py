@@ -101,9 +101,10 @@ def test_transform_matrices_equal_the_single_transform():
 
 
 # -- bending ---------------------------------------------------------------------------------------
-def test_bend_profiles_equal_the_single_leaf_solve(presets):
-    from leafview.deform.beam import bend_profile
-    from leafview.scene.bends import bend_profiles
+def test_bend_profiles_walked_together_equal_each_leaf_walked_alone(presets):
+    """The batched walk groups leaves by silhouette rows and petiole: each leaf's profile must not
+    depend on the leaves it is walked with."""
+    from leafview.deform.beam import bend_profiles
 
     rng = np.random.default_rng(11)
     leaves = [presets["maize"], presets["willow"]]
@@ -124,7 +125,7 @@ def test_bend_profiles_equal_the_single_leaf_solve(presets):
     assert len(got) == len(leaves)
     bent = 0
     for leaf, p in zip(leaves, got):
-        ref = bend_profile(leaf)
+        ref = bend_profiles([leaf])[0]
         for a, b in ((p.axis, ref.axis), (p.phi, ref.phi), (p.delta, ref.delta)):
             assert np.allclose(a, b, rtol=0.0, atol=1e-12)
         assert p.twist == pytest.approx(ref.twist, abs=1e-15)

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, Protocol
 
@@ -53,6 +53,7 @@ __all__ = [
     "Bending",
     "LeafParams",
     "field_specs",
+    "transform_matrices",
     "omega_sizes",
     "split_omega",
 ]
@@ -374,6 +375,23 @@ def _file_io() -> FileIO:
     if not _FILE_IO:
         raise RuntimeError("leafview.core.io is not loaded: import leafview (or leafview.core) first")
     return _FILE_IO[0]
+
+
+def transform_matrices(transforms: Sequence[Transform]) -> NDArray[np.float64]:
+    """(N, 4, 4) :meth:`~leafview.core.params.Transform.matrix` of every transform, vectorised:
+    ``T · Rz · Ry · Rx · s`` (rotations in degrees, column vectors)."""
+    n = len(transforms)
+    rot = np.radians(np.array([t.rotation for t in transforms], np.float64).reshape(n, 3))
+    c, s = np.cos(rot), np.sin(rot)
+    one, zero = np.ones(n), np.zeros(n)
+    r_x = np.stack([one, zero, zero, zero, c[:, 0], -s[:, 0], zero, s[:, 0], c[:, 0]], axis=1).reshape(n, 3, 3)
+    r_y = np.stack([c[:, 1], zero, s[:, 1], zero, one, zero, -s[:, 1], zero, c[:, 1]], axis=1).reshape(n, 3, 3)
+    r_z = np.stack([c[:, 2], -s[:, 2], zero, s[:, 2], c[:, 2], zero, zero, zero, one], axis=1).reshape(n, 3, 3)
+    m = np.zeros((n, 4, 4))
+    m[:, :3, :3] = r_z @ r_y @ r_x * np.array([t.scale for t in transforms], np.float64)[:, None, None]
+    m[:, :3, 3] = np.array([t.translation for t in transforms], np.float64).reshape(n, 3)
+    m[:, 3, 3] = 1.0
+    return m
 
 
 def omega_sizes() -> dict[int, int]:

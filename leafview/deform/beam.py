@@ -19,19 +19,24 @@ measured after the rotations of the segments before it, and rotating a segment t
 beyond it (Hu et al.'s joint rotation). All rotations are about one axis ``N = ŷ × ĝ`` (ĝ the load
 direction in leaf space), so the bend is described by the accumulated angle Φ(v) and the offset
 Δ(v) of the bent midrib from the straight one, sampled at ``BEND_SAMPLES`` values of v.
+
+The chain lives once: :func:`bend_profiles` walks the chains of many leaves together (a scene's
+species, a leaf set), and :func:`bend_profile` is that walk for one leaf, cached.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from functools import lru_cache
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from leafview.core.blade import blade_partials
-from leafview.core.params import Bending, LeafParams, ParamError, Ripple, Shape, Transform, Vec3
+from leafview.core.bezier import bernstein
+from leafview.core.blade import axis_frames
+from leafview.core.params import Bending, LeafParams, ParamError, Shape, Transform, Vec3, transform_matrices
 
-__all__ = ["solve_bending", "residual", "bend_profile", "BendProfile", "BEND_SAMPLES", "MIDRIB_SEGMENTS",
+__all__ = ["solve_bending", "residual", "bend_profile", "bend_profiles", "BendProfile", "BEND_SAMPLES", "MIDRIB_SEGMENTS",
            "PETIOLE_SEGMENTS", "rotation", "sample_clamped"]
 
 BEND_SAMPLES = 8
@@ -132,78 +137,145 @@ def bend_profile(params: LeafParams) -> BendProfile:
     return _bend_profile_cached(params.shape, params.bending, t.rotation, t.scale)
 
 
-def _blade_points(params: LeafParams, u: ArrayLike, v: ArrayLike) -> NDArray[np.float64]:
-    """Points of the undeformed blade (jitter included): the straight chain the beam bends."""
-    return blade_partials(params, u, v)[0].L
-
-
 @lru_cache(maxsize=64)
 def _bend_profile_cached(shape: Shape, bending: Bending, rotation_deg: Vec3, scale: float) -> BendProfile:
     params = LeafParams(shape=shape, bending=bending, transform=Transform(rotation=rotation_deg, scale=scale))
+    return bend_profiles([params])[0]
 
-    b = params.bending
-    k = BEND_SAMPLES
-    twist = float(np.radians(b.twist))
-    m = params.transform.matrix()[:3, :3]
-    g = np.linalg.solve(m, np.asarray(b.direction, np.float64))  # world direction into leaf space
-    g /= np.linalg.norm(g)
-    axis = np.cross([0.0, 1.0, 0.0], g)
-    if b.load <= 0.0 or np.linalg.norm(axis) < 1e-9:
-        return BendProfile(np.array([1.0, 0.0, 0.0]), np.zeros(k), np.zeros((k, 3)), twist)
-    axis /= np.linalg.norm(axis)
 
-    # the straight chain: petiole from (0, -Lp, 0) to the base, then the midrib A(v) of the
-    # unbent, unrippled blade
-    params = params.replace(bending=Bending(), ripple=Ripple())
-    v = np.linspace(0.0, 1.0, MIDRIB_SEGMENTS + 1)
-    joints = _blade_points(params, np.zeros_like(v), v)
-    seg = np.diff(joints, axis=0)
-    vm = 0.5 * (v[1:] + v[:-1])
-    width = np.linalg.norm(_blade_points(params, np.ones_like(vm), vm) - _blade_points(params, -np.ones_like(vm), vm), axis=1)
-    ds = np.linalg.norm(seg, axis=1)
-    # a segment whose joints coincide (a cusp of the axis exactly between two samples) has no
-    # direction: give it a tiny length along its neighbour's direction so eq. 4 stays defined
-    floor = 1e-12 * max(float(ds.sum()), 1.0)
-    short = ~(ds > floor)
+_V = np.linspace(0.0, 1.0, MIDRIB_SEGMENTS + 1)           # the joints' v
+_VM = 0.5 * (_V[1:] + _V[:-1])                              # the segments' middles (strip widths)
+_VK = np.linspace(0.0, 1.0, BEND_SAMPLES)                   # the samples the shader reads
+_Y = np.array([0.0, 1.0, 0.0])
+
+
+def _rotate(d: NDArray[np.float64], axis: NDArray[np.float64], angle: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``d`` turned about the unit ``axis`` by ``angle`` (Rodrigues), broadcast over leading axes."""
+    c, s = np.cos(angle)[..., None], np.sin(angle)[..., None]
+    return d * c + np.cross(axis, d) * s + axis * (np.sum(axis * d, axis=-1)[..., None] * (1.0 - c))
+
+
+def _loads(leaves: Sequence[LeafParams]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.bool_]]:
+    """Per leaf: the bend axis N = ŷ × ĝ and the load direction ĝ in leaf space (L, 3) each, and
+    whether anything bends (a load, not along the midrib)."""
+    m = transform_matrices([leaf.transform for leaf in leaves])[:, :3, :3]
+    direction = np.array([leaf.bending.direction for leaf in leaves], np.float64).reshape(-1, 3)
+    g = np.asarray(np.linalg.solve(m, direction[:, :, None])[:, :, 0], np.float64)   # world direction into leaf space
+    g /= np.linalg.norm(g, axis=1, keepdims=True)
+    axis: NDArray[np.float64] = np.cross(_Y, g)
+    norm = np.linalg.norm(axis, axis=1)
+    load = np.array([leaf.bending.load for leaf in leaves], np.float64)
+    bends: NDArray[np.bool_] = (load > 0.0) & (norm >= 1e-9)
+    axis[bends] /= norm[bends, None]
+    return axis, g, bends
+
+
+def _straight(leaves: Sequence[LeafParams]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The unbent blades' midribs at the joints (L, J, 3) and at the samples (L, K, 3), and their
+    widths at the segments' middles (L, J - 1), all leaves of one silhouette row count N at
+    once. The midrib is the axis A(v) (Chaurasia & Beardsley 2017, eq. 3; the surface at u = 0);
+    the margins are S± = P ± Q (eq. 4, the quartics through A(v̄_i) and the in-plane offsets
+    q_i of :func:`~leafview.core.blade.axis_frames`), so the width is |S+ - S-| = 2 |Q(v)|."""
+    axis_points = np.stack([leaf.shape.axis_points() for leaf in leaves])          # (L, 4, 3)
+    joints = np.einsum("vk,lkd->lvd", bernstein(3, _V), axis_points)
+    straight_k = np.einsum("vk,lkd->lvd", bernstein(3, _VK), axis_points)
+    rows = leaves[0].shape.rows
+    q = np.zeros((len(leaves), rows + 2, 3))                                          # Q's control points
+    q[:, 1:-1] = np.stack([axis_frames(leaf)[1] for leaf in leaves])
+    width = 2.0 * np.linalg.norm(np.einsum("vk,lkd->lvd", bernstein(rows + 1, _VM), q), axis=2)
+    return joints, straight_k, width
+
+
+def _chains(leaves: Sequence[LeafParams]) -> tuple[NDArray[np.float64], ...]:
+    """The straight chains of leaves of one silhouette row count and one petiole state (all with
+    a petiole or none): segment directions (L, S, 3), lengths, carried loads and EI (L, S), and
+    the straight midrib at the samples (L, K, 3)."""
+    joints, straight_k, width = _straight(leaves)
+    load = np.array([leaf.bending.load for leaf in leaves])[:, None]
+    seg = np.diff(joints, axis=1)
+    ds = np.linalg.norm(seg, axis=2)
+    floor = 1e-12 * np.maximum(ds.sum(axis=1), 1.0)    # coinciding joints: a tiny segment along y
+    short = ~(ds > floor[:, None])
     if short.any():
-        seg = seg.copy()
-        seg[short] = floor * np.array([0.0, 1.0, 0.0])
-        ds = np.linalg.norm(seg, axis=1)
-    # strip area × load, per unit of segment length (÷ the mean step), so that eq. 4's ds² makes
-    # each φ_i ≈ ds_i · moment / EI and the shape does not depend on the number of segments
-    forces = b.load * width * ds / ds.mean()
-    ei = np.full(len(ds), b.stiffness)
-    dirs = seg / ds[:, None]
-    n_pet = PETIOLE_SEGMENTS if b.petiole_length > 0 else 0
-    if n_pet:
-        ds = np.r_[np.full(n_pet, b.petiole_length / n_pet), ds]
-        forces = np.r_[np.zeros(n_pet), forces]
-        ei = np.r_[np.full(n_pet, b.petiole_stiffness), ei]
-        dirs = np.r_[np.tile([0.0, 1.0, 0.0], (n_pet, 1)), dirs]
-    carried = np.cumsum(forces[::-1])[::-1]            # |Σ_{j>=i} F_j|, all along ĝ
+        seg[short] = np.broadcast_to((floor[:, None] * _Y)[:, None, :], seg.shape)[short]
+        ds = np.linalg.norm(seg, axis=2)
+    # strip area × load, per unit of segment length (÷ the mean step)
+    forces = load * width * ds / ds.mean(axis=1, keepdims=True)
+    ei = np.repeat(np.array([leaf.bending.stiffness for leaf in leaves])[:, None], ds.shape[1], axis=1)
+    dirs = seg / ds[:, :, None]
+    if leaves[0].bending.petiole_length > 0:
+        n, k = len(leaves), PETIOLE_SEGMENTS
+        length = np.array([leaf.bending.petiole_length for leaf in leaves])
+        ds = np.concatenate([np.repeat((length / k)[:, None], k, axis=1), ds], axis=1)
+        forces = np.concatenate([np.zeros((n, k)), forces], axis=1)
+        stiff = np.array([leaf.bending.petiole_stiffness for leaf in leaves])
+        ei = np.concatenate([np.repeat(stiff[:, None], k, axis=1), ei], axis=1)
+        dirs = np.concatenate([np.broadcast_to(_Y, (n, k, 3)), dirs], axis=1)
+    carried = np.cumsum(forces[:, ::-1], axis=1)[:, ::-1]     # |Σ_{j>=i} F_j|, all along ĝ
+    return dirs, ds, carried, ei, straight_k
 
-    total = 0.0
-    angles = np.empty(len(ds))
-    for i in range(len(ds)):                           # sequential: θ⁰ after earlier rotations
-        d = rotation(axis, total) @ dirs[i]
-        theta = np.arctan2(np.dot(axis, np.cross(d, g)), np.dot(d, g))
-        # a segment too short to have a length in float64 (a petiole of 1e-300 split in 8) cannot bend
-        phi = solve_bending(ds[i], abs(theta), carried[i], ei[i]) if ds[i] > 0.0 else 0.0
-        total += np.sign(theta) * float(phi)
-        angles[i] = total
-    bent_dirs = np.einsum("nij,nj->ni", rotation(axis, angles), dirs)
-    start = np.array([0.0, -b.petiole_length, 0.0]) if n_pet else np.zeros(3)
-    points = start + np.r_[[np.zeros(3)], np.cumsum(bent_dirs * ds[:, None], axis=0)]
 
-    # back to the blade's v: joint n_pet is the leaf base
-    blade_points = points[n_pet:]
-    blade_phi = np.r_[angles[n_pet - 1] if n_pet else 0.0, angles[n_pet:]]
-    blade_phi = np.r_[blade_phi[0], 0.5 * (blade_phi[1:-1] + blade_phi[2:]), blade_phi[-1]]
-    vk = np.linspace(0.0, 1.0, k)
-    phi_k = np.interp(vk, v, blade_phi)
-    bent_k = np.stack([np.interp(vk, v, blade_points[:, c]) for c in range(3)], axis=1)
-    straight_k = _blade_points(params, np.zeros(k), vk)
-    delta = bent_k - straight_k
-    if not (np.isfinite(phi_k).all() and np.isfinite(delta).all()):   # unreachable within the accepted ranges
-        raise ParamError("bending", "the cantilever solve gave non-finite angles for this leaf")
-    return BendProfile(axis, phi_k, delta, twist)
+def _walk(axis: NDArray[np.float64], g: NDArray[np.float64], dirs: NDArray[np.float64], ds: NDArray[np.float64],
+          carried: NDArray[np.float64], ei: NDArray[np.float64], petiole: NDArray[np.float64]
+          ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Bend chains of equal length together (bend axes and load directions (G, 3), the chains as
+    :func:`_chains` gives them): Φ_k (G, K) and the bent midrib at the samples (G, K, 3), for
+    leaves with petioles of length ``petiole`` (G,) (0: none)."""
+    count, n_seg = ds.shape
+    n_pet = n_seg - MIDRIB_SEGMENTS
+    total = np.zeros(count)
+    angles = np.empty_like(ds)
+    for i in range(n_seg):   # sequential: θ⁰ after the earlier rotations
+        d = _rotate(dirs[:, i], axis, total)
+        theta = np.arctan2(np.sum(axis * np.cross(d, g), axis=1), np.sum(d * g, axis=1))
+        phi = np.zeros(count)
+        ok = ds[:, i] > 0.0   # a segment too short to have a length in float64 cannot bend
+        if ok.any():
+            phi[ok] = solve_bending(ds[ok, i], np.abs(theta[ok]), carried[ok, i], ei[ok, i])
+        total = total + np.sign(theta) * phi
+        angles[:, i] = total
+    bent_dirs = _rotate(dirs, axis[:, None, :], angles)
+    start = np.zeros((count, 1, 3))
+    start[:, 0, 1] = -petiole
+    points = start + np.concatenate([np.zeros((count, 1, 3)), np.cumsum(bent_dirs * ds[:, :, None], axis=1)], axis=1)
+    blade_points = points[:, n_pet:]          # joint n_pet is the leaf base
+    first = angles[:, n_pet - 1] if n_pet else np.zeros(count)
+    blade_phi = np.concatenate([first[:, None], angles[:, n_pet:]], axis=1)
+    blade_phi = np.concatenate([blade_phi[:, :1], 0.5 * (blade_phi[:, 1:-1] + blade_phi[:, 2:]), blade_phi[:, -1:]],
+                               axis=1)
+    phi_k = np.stack([np.interp(_VK, _V, row) for row in blade_phi])
+    bent_k = np.stack([np.stack([np.interp(_VK, _V, pts[:, c]) for c in range(3)], axis=1) for pts in blade_points])
+    return phi_k, bent_k
+
+
+def bend_profiles(leaves: Sequence[LeafParams]) -> list[BendProfile]:
+    """The bend profile of every leaf (see the module docstring), the chains walked together:
+    the straight chains come from the axis and the margins' Bézier control points of all leaves
+    at once, and the sequential walk along the chain advances all leaves by one segment per numpy
+    step, so a leaf set of bent leaves, each with a shape of its own, costs a few small per-leaf
+    steps (its axis frames) and vectorised work for the rest. Raises :class:`~leafview.core.params.ParamError` (``bending``) when a
+    solve gives non-finite numbers (unreachable within the accepted ranges)."""
+    out: list[BendProfile | None] = [None] * len(leaves)
+    if not leaves:
+        return []
+    axes, gs, bends = _loads(leaves)
+    groups: dict[tuple[int, bool], list[int]] = {}      # (silhouette rows, petiole) -> leaves that bend
+    for i, leaf in enumerate(leaves):
+        if not bends[i]:
+            out[i] = BendProfile(np.array([1.0, 0.0, 0.0]), np.zeros(BEND_SAMPLES), np.zeros((BEND_SAMPLES, 3)),
+                                 float(np.radians(leaf.bending.twist)))
+        else:
+            groups.setdefault((leaf.shape.rows, leaf.bending.petiole_length > 0), []).append(i)
+    for members in groups.values():
+        group = [leaves[i] for i in members]
+        dirs, ds, carried, ei, straight_k = _chains(group)
+        axis, g = axes[members], gs[members]
+        petiole = np.array([leaf.bending.petiole_length for leaf in group], np.float64)
+        phi_k, bent_k = _walk(axis, g, dirs, ds, carried, ei, petiole)
+        delta = bent_k - straight_k
+        for row, i in enumerate(members):
+            if not (np.isfinite(phi_k[row]).all() and np.isfinite(delta[row]).all()):
+                raise ParamError("bending", "the cantilever solve gave non-finite angles for this leaf")
+            out[i] = BendProfile(axis[row].copy(), phi_k[row].copy(), delta[row].copy(),
+                                 float(np.radians(leaves[i].bending.twist)))
+    return [p for p in out if p is not None]

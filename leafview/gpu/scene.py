@@ -34,6 +34,7 @@ from scipy.ndimage import distance_transform_edt
 
 from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.params import Bending, LeafParams
+from leafview.deform.beam import bend_profiles
 from leafview.deform.surface import drawn_uv, evaluate, grid_indices, grid_uv
 from leafview.errors import SceneLimitError
 from leafview.gpu.bounds import LeafBounds
@@ -61,7 +62,6 @@ from leafview.gpu.limits import check_scene, ensure_alive
 from leafview.gpu.owner import GLObjects
 from leafview.gpu.resources import GpuResources, JitterTable, RowTexture, record_vertex_array
 from leafview.resources import resolve_preset
-from leafview.scene.bends import bend_profiles
 from leafview.scene.camera import Camera, top_down
 from leafview.scene.spec import Scene, SceneSpec
 
@@ -85,7 +85,7 @@ def species_tables(scene: Scene) -> tuple[NDArray[Any], NDArray[np.float32], lis
     Species that differ only in Ω's 21 numbers, their colours and their bend profile (a leaf set:
     a species per leaf) share one *template* record, packed once; each species' Ω and colours then
     go straight into its row, vectorised, and the bend profiles of the bent ones are solved
-    together, once per distinct shape, bending and frame (:func:`leafview.scene.bends.bend_profiles`).
+    together, once per distinct shape, bending and frame (:func:`leafview.deform.beam.bend_profiles`).
     An extended silhouette is a template of its own (its further rows depend on its whole shape)."""
     index: dict[tuple[Any, ...], int] = {}
     by_identity: dict[tuple[int, ...], int] = {}   # the same objects (shared by the species) hash once

@@ -46,7 +46,16 @@ from leafview.core.limits import (
     check_name,
     scene_bytes,
 )
-from leafview.core.params import Bending, LeafParams, ParamError, Shape, Transform, Vec3, parse_params
+from leafview.core.params import (
+    Bending,
+    LeafParams,
+    ParamError,
+    Shape,
+    Transform,
+    Vec3,
+    parse_params,
+    transform_matrices,
+)
 from leafview.deform.beam import bend_profile
 from leafview.deform.surface import evaluate, grid_uv, partials
 from leafview.resources import builtin_presets
@@ -445,7 +454,7 @@ def scene_from_leaves(leaves: Sequence[LeafParams], name: str = "") -> Scene:
     per-species work therefore runs per leaf, vectorised: the shapes go straight into the rows
     (:func:`leafview.gpu.scene.species_tables`), the culling spheres and level-of-detail errors
     come from one GPU dispatch (:mod:`leafview.gpu.bounds`), and the cantilevers of bent leaves
-    are solved together (:mod:`leafview.scene.bends`)."""
+    are solved together (:func:`leafview.deform.beam.bend_profiles`)."""
     if not leaves:
         raise ParamError("leaves", "a scene needs at least one leaf")
     identity = Transform()
@@ -467,23 +476,6 @@ def _unplaced(leaf: LeafParams, identity: Transform) -> LeafParams:
     fields_.update(leaf.__dict__)
     fields_["transform"] = identity
     return out
-
-
-def transform_matrices(transforms: Sequence[Transform]) -> NDArray[np.float64]:
-    """(N, 4, 4) :meth:`~leafview.core.params.Transform.matrix` of every transform, vectorised:
-    ``T · Rz · Ry · Rx · s`` (rotations in degrees, column vectors)."""
-    n = len(transforms)
-    rot = np.radians(np.array([t.rotation for t in transforms], np.float64).reshape(n, 3))
-    c, s = np.cos(rot), np.sin(rot)
-    one, zero = np.ones(n), np.zeros(n)
-    r_x = np.stack([one, zero, zero, zero, c[:, 0], -s[:, 0], zero, s[:, 0], c[:, 0]], axis=1).reshape(n, 3, 3)
-    r_y = np.stack([c[:, 1], zero, s[:, 1], zero, one, zero, -s[:, 1], zero, c[:, 1]], axis=1).reshape(n, 3, 3)
-    r_z = np.stack([c[:, 2], -s[:, 2], zero, s[:, 2], c[:, 2], zero, zero, zero, one], axis=1).reshape(n, 3, 3)
-    m = np.zeros((n, 4, 4))
-    m[:, :3, :3] = r_z @ r_y @ r_x * np.array([t.scale for t in transforms], np.float64)[:, None, None]
-    m[:, :3, 3] = np.array([t.translation for t in transforms], np.float64).reshape(n, 3)
-    m[:, 3, 3] = 1.0
-    return m
 
 
 def evaluate_leaf(scene: Scene, i: int, u: NDArray[np.floating], v: NDArray[np.floating]) -> NDArray[np.float64]:
