@@ -39,4 +39,5 @@ def test_shapes_bench_quick_run_fills_the_table(gl):
     parts = sum(res[f"landmark_{k}_ms"] for k in ("generate", "fit", "pack", "draw"))
     assert abs(1e3 / parts - res["landmark_leaves_per_s"]) <= 1e-9 * res["landmark_leaves_per_s"]
     assert 0.0 <= res["landmark_fit_within_target"] <= 1.0 and res["landmark_fit_error_max"] > 0.0
+    assert 0.0 <= res["landmark_refit_share"] <= 1.0 and "refitted" in table
     json.dumps(res)

@@ -15,6 +15,7 @@ from leafview.botany.outline_fit import (
     params_from_controls,
     rows_from_controls,
 )
+from leafview.botany.shapes import fit_instances
 from leafview.core.defaults import INSTANCE_FIT_TARGET
 from leafview.core.params import ParamError
 
@@ -143,3 +144,20 @@ def test_bad_options_are_named():
     with pytest.raises(ParamError) as err:
         qf.error_bound(np.zeros((1, 5, 2)), bf.split_outlines(rings)[0])
     assert err.value.path == "ctrl"
+
+
+def test_fit_instances_reports_its_quick_pass_and_what_it_refitted():
+    """fit_instances keeps the quick pass's leaves where that pass met its aim and refits the rest;
+    the record it returns is what the shapes benchmark reports (no second quick fit there)."""
+    leaves = _instances(40, 300)
+    rings = outlines(leaves, 128)
+    names = [leaf.name for leaf in leaves]
+    got = fit_instances(rings, TARGET, names)
+    assert len(got.params) == 40 and len(got.quick) == 40
+    kept = np.setdiff1d(np.arange(40), got.refitted)
+    assert all(got.params[i] is got.quick.params[i] for i in kept)
+    assert np.all(got.quick.errors[kept] <= TARGET) and np.all(got.quick.min_jacobian[kept] > 0.0)
+    assert got.refit_share == pytest.approx(got.refitted.size / 40)
+    right, left = bf.split_outlines(rings)
+    measured = bf.outline_errors(bf.controls_from_params(got.params), right, left)[:, 0]
+    assert np.mean(measured <= TARGET + SLACK) >= 0.95

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from leafview.botany.batch_fit import fit_outlines
+from leafview.botany.batch_fit import BatchFit, fit_outlines
 from leafview.botany.catalogue import ShapeEntry, landmark_leaf, random_instance
 from leafview.botany.catalogue import catalogue as _catalogue
 from leafview.botany.landmarks import LandmarkLeaf, outline, outlines
@@ -38,7 +38,7 @@ INSTANCE_TARGET = INSTANCE_FIT_TARGET
 _HAUSDORFF_SLACK = 5e-4     # half the 1e-3 densification step of outline_fit.hausdorff
 
 __all__ = ["INSTANCE_TARGET", "ShapeEntry", "ShapeFitInfo", "catalogue", "landmark_leaf", "shapes_dir",
-           "shape_names", "shapes_params", "fit_info", "fit_landmark_leaf", "fit_instances", "instances"]
+           "shape_names", "shapes_params", "fit_info", "fit_landmark_leaf", "fit_instances", "InstanceFit", "instances"]
 
 
 def catalogue() -> list[ShapeEntry]:
@@ -184,10 +184,26 @@ def instances(names_or_leaves: LeafOrName | list[LeafOrName] | tuple[LeafOrName,
             raise ParamError(f"names_or_leaves[{k}]", f"expected a catalogue name or a LandmarkLeaf, got {type(item).__name__}")
         leaves.append(random_instance(base, int(seed), amount))
         names.append(f"{label}#{int(seed)}")
-    return fit_instances(outlines(leaves, n), target, names)
+    return fit_instances(outlines(leaves, n), target, names).params
 
 
-def fit_instances(rings: NDArray[np.float64], target: float, names: list[str]) -> list[LeafParams]:
+@dataclass(frozen=True)
+class InstanceFit:
+    """What :func:`fit_instances` did: the fitted leaves, the quick pass over all of them (its
+    own errors and fold measure, aimed at ``target`` less the Hausdorff slack) and the leaves the
+    full batch fit refitted."""
+
+    params: list[LeafParams]
+    quick: BatchFit
+    refitted: NDArray[np.int64]
+
+    @property
+    def refit_share(self) -> float:
+        """The share of leaves the quick fit missed (refitted by the full batch fit)."""
+        return float(self.refitted.size / max(len(self.params), 1))
+
+
+def fit_instances(rings: NDArray[np.float64], target: float, names: list[str]) -> InstanceFit:
     """Ω fitted to the closed outlines ``rings`` (B, 2n - 2, 2) to within ``target``: the quick
     batch fit (:func:`~leafview.botany.quick_fit.quick_fit_outlines`) for all, aiming half a
     :func:`~leafview.botany.outline_fit.hausdorff` step below ``target`` (that measure's
@@ -202,5 +218,5 @@ def fit_instances(rings: NDArray[np.float64], target: float, names: list[str]) -
         for k, i in enumerate(missed):
             if (full.min_jacobian[k] > 0.0, -full.errors[k]) >= (quick.min_jacobian[i] > 0.0, -quick.errors[i]):
                 params[i] = full.params[k]
-    return params
+    return InstanceFit(params, quick, missed.astype(np.int64))
 
