@@ -3,6 +3,11 @@
 // diffuse transmission ("translucency") for light arriving from the other side, a faint
 // specular sheen on the upper side and a lighter midrib.
 //
+// A textured leaf (v_layers >= 0; leaf_texture.glsl) takes its albedo from its image instead: the
+// texel decoded from sRGB, nothing else (no midrib), and its texels with alpha < 0.5 (the mask's
+// teeth and holes) are discarded, in the label pass too, so labels match the picture.
+// LEAF_NO_TEXTURE (a draw without textured leaves) compiles all of it out.
+//
 // LEAF_AOV: the label pass of leafview/gpu/aov.py instead of a colour: one output per
 // AOV_OUTPUTS entry of leafview/gpu/layout.py (leaf index + 1, view-space depth, world normal of
 // the visible side, (u, v)); LEAF_STEMS marks the stem program (leaf_baked.vert, no leaf index):
@@ -15,6 +20,10 @@ in vec3 v_normal;
 in vec2 v_uv;
 flat in vec4 v_front;
 flat in vec3 v_back;
+flat in ivec2 v_layers;
+#ifndef LEAF_NO_TEXTURE
+#include "leaf_texture.glsl"
+#endif
 
 #ifdef LEAF_AOV
 #ifndef LEAF_STEMS
@@ -39,12 +48,36 @@ vec3 light_term(vec3 n, vec3 view_dir, vec4 light, vec3 albedo, float translucen
     return light.w * ((diffuse + through) * albedo + vec3(spec));
 }
 
+// The albedo of the visible side; false where a textured leaf's image is transparent (alpha < 0.5).
+bool leaf_albedo(out vec3 albedo) {
+    bool front = gl_FrontFacing;
+#ifndef LEAF_NO_TEXTURE
+    vec2 st = leaf_texture_st(v_uv);
+    vec2 st_dx = dFdx(st), st_dy = dFdy(st);   // before the branch: the mip level needs the whole quad
+    int layer = front ? v_layers.x : v_layers.y;
+    if (layer >= 0) {   // flat per leaf: untextured leaves never sample
+        vec4 texel = textureGrad(leaf_textures, vec3(st, float(layer)), st_dx, st_dy);
+        albedo = srgb_to_linear(texel.rgb);
+        return texel.a >= 0.5;
+    }
+#endif
+    albedo = front ? v_front.rgb : v_back;
+    // midrib: a narrow lighter band along u = 0, fading toward the apex
+    float rib = (1.0 - smoothstep(0.012, 0.035, abs(v_uv.x))) * (1.0 - 0.6 * v_uv.y);
+    albedo = mix(albedo, albedo * 1.35 + vec3(0.05), 0.6 * rib);
+    return true;
+}
+
 #ifdef LEAF_AOV
 void main() {
 #ifdef LEAF_STEMS
     aov_instance = 0u;
     aov_uv = vec2(0.0);
 #else
+#ifndef LEAF_NO_TEXTURE
+    vec3 albedo;
+    if (!leaf_albedo(albedo)) discard;
+#endif
     aov_instance = v_leaf + 1u;
     aov_uv = v_uv;
 #endif
@@ -55,11 +88,13 @@ void main() {
 void main() {
     bool front = gl_FrontFacing;
     vec3 n = visible_normal();
-    vec3 albedo = front ? v_front.rgb : v_back;
+    vec3 albedo;
+#ifdef LEAF_NO_TEXTURE
+    leaf_albedo(albedo);
+#else
+    if (!leaf_albedo(albedo)) discard;
+#endif
     float translucency = v_front.a;
-    // midrib: a narrow lighter band along u = 0, fading toward the apex
-    float rib = (1.0 - smoothstep(0.012, 0.035, abs(v_uv.x))) * (1.0 - 0.6 * v_uv.y);
-    albedo = mix(albedo, albedo * 1.35 + vec3(0.05), 0.6 * rib);
 
     vec3 view_dir = frame.eye.w > 0.5 ? normalize(frame.eye.xyz - v_world) : -normalize(frame.eye.xyz);
     vec3 color = frame.ambient.rgb * albedo;

@@ -44,6 +44,7 @@ out vec3 v_normal;
 out vec2 v_uv;
 flat out vec4 v_front;      // rgb, translucency
 flat out vec3 v_back;
+flat out ivec2 v_layers;    // front, back image texture layer, -1 untextured (leaf.frag)
 #ifdef LEAF_AOV
 // label pass (leafview/gpu/aov.py): the scene's index of the leaf, for the instance output
 flat out uint v_leaf;
@@ -72,12 +73,14 @@ void main() {
     vec3 n = leaf_normal(e, uv.y);
     v_object = e.L;
     v_object_normal = n;
-    vec4 world = LEAF.model * vec4(e.L, 1.0);
+    // mat4x3: the model matrix's last row holds the texture layers (leafview/gpu/layout.py, LEAF_SLOTS)
+    vec4 world = vec4(mat4x3(LEAF.model) * vec4(e.L, 1.0), 1.0);
     v_world = world.xyz;
     v_normal = normalize(mat3(LEAF.model) * n);  // rotation and uniform scale only
     v_uv = uv;
     v_front = LEAF.front;
     v_back = LEAF.back.rgb;
+    v_layers = ivec2(leaf_front_layer(LEAF), leaf_back_layer(LEAF));
 #ifdef LEAF_AOV
     v_leaf = LEAF_INDEX;
 #endif

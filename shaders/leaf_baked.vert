@@ -9,12 +9,17 @@ in vec3 in_normal;     // world space, unit, upper (front) side
 in vec2 in_uv;
 in vec4 in_front;      // rgb, translucency (normalised bytes)
 in vec4 in_back;       // rgb, unused
+#ifndef LEAF_NO_TEXTURE
+in vec2 in_layers;     // front, back image texture layer + 1 as LEAF_SLOTS stores them (0: untextured;
+                       // an unbound attribute reads 0)
+#endif
 
 out vec3 v_world;
 out vec3 v_normal;
 out vec2 v_uv;
 flat out vec4 v_front;
 flat out vec3 v_back;
+flat out ivec2 v_layers;
 
 void main() {
     v_world = in_position;
@@ -22,5 +27,10 @@ void main() {
     v_uv = in_uv;
     v_front = in_front;
     v_back = in_back.rgb;
+#ifdef LEAF_NO_TEXTURE
+    v_layers = ivec2(-1);
+#else
+    v_layers = ivec2(in_layers) - 1;
+#endif
     gl_Position = frame.proj * frame.view * vec4(in_position, 1.0);
 }

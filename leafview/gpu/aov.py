@@ -16,6 +16,10 @@ returns any of :data:`AOV_NAMES`:
     ``leaf.frag`` with ``LEAF_AOV`` (``leaf.vert`` passes the scene's leaf index, batch offset
     included, as ``v_leaf``); the stems are drawn first, as in the picture, with ``LEAF_STEMS``.
 
+Textured leaves (:mod:`leafview.gpu.textures`) are labelled where the picture shows them: the
+label pass discards the texels whose alpha is below 0.5, as the picture does, so holes and teeth
+of the mask show what lies behind them in both.
+
 Stems take part in the label pass: they hide the leaves behind them and write their depth and
 normal, but their instance is 0 and their (u, v) is (0, 0), like the background. A pixel with
 ``instance == 0`` and ``depth > 0`` is therefore a stem.

@@ -12,7 +12,8 @@ when a leaf takes one of those branches) in those branches only.
 ahead of time, either on the CPU with the numpy reference (:meth:`BakedLeaves.from_params`,
 :func:`leafview.deform.surface.tessellate`) or captured from the instanced vertex shader
 (:meth:`BakedLeaves.from_instanced`, fast for 10⁴ leaves): one vertex buffer for all leaves
-(40 bytes a vertex), one index buffer, one draw call, ``leaf_baked.vert`` + the same ``leaf.frag``.
+(40 bytes a vertex), one index buffer, one draw call, ``leaf_baked.vert`` + the same ``leaf.frag``,
+in the leaves' plain colours (image textures: :class:`InstancedLeaves` with ``textures=``).
 
 Both are used by :mod:`leafview.bench.core` (parameters vs baked meshes) and by the tests that
 check they draw the same picture. Neither changes the framebuffer binding: bind a target, call
@@ -34,11 +35,20 @@ from leafview.core.params import Jitter, LeafParams, Material, Shape, Transform
 from leafview.deform.surface import grid_indices, grid_uv, tessellate
 from leafview.errors import GpuLimitError
 from leafview.gpu.frame import FrameUniforms, Lighting
-from leafview.gpu.layout import LEAF_BLOCK, LEAVES_BINDING, feature_defines, needs_row_texture, pack_leaves
+from leafview.gpu.layout import (
+    LEAF_BLOCK,
+    LEAVES_BINDING,
+    PLAIN_DEFINES,
+    feature_defines,
+    needs_row_texture,
+    pack_leaves,
+    texture_defines,
+)
 from leafview.gpu.limits import capture_bytes, check_buffer, check_grid, ensure_alive
 from leafview.gpu.owner import GLObjects
 from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, Grid, JitterTable, RowTexture, record_vertex_array
 from leafview.gpu.targets import OffscreenTarget, read_rgba
+from leafview.gpu.textures import LeafTextures
 from leafview.scene.camera import Camera
 
 __all__ = ["LEAVES_BINDING", "InstancedLeaves", "BakedLeaves", "pack_leaves", "bake_leaves",
@@ -176,12 +186,16 @@ class InstancedLeaves(_Batch):
         ``(seed, beta)`` of each ripple signal row (:func:`~leafview.gpu.layout.ripple_keys`).
     resources:
         Shared programs, grids and capture; ``None``: a private set, released with this batch.
+    textures:
+        The image textures of the records' texture layers (the caller's: ``keys =
+        textures.update(params)``, then ``pack_leaves(params, textures=keys)``); ``None``: every
+        leaf in its plain colours.
     """
 
     def __init__(self, ctx: moderngl.Context, records: Any, grid: tuple[int, int] = (9, 15), *,
                  jitter_tables: ArrayLike | None = None,
                  ripple_signals: Sequence[tuple[int, float]] = (),
-                 resources: GpuResources | None = None) -> None:
+                 resources: GpuResources | None = None, textures: LeafTextures | None = None) -> None:
         recs = self.records = _as_records(records)
         self.count = int(recs.shape[0])
         ensure_alive(ctx, "uploading instanced leaves")
@@ -196,8 +210,11 @@ class InstancedLeaves(_Batch):
         super().__init__(ctx, resources)
         try:
             self.nu, self.nv = grid
-            self.program = self.resources.leaf_program({"LEAF_INSTANCED": 1, **feature_defines(recs)},
-                                                       varyings=WORLD_VARYINGS)
+            self.textures = textures
+            plain = textures is None or textures.texture is None
+            self.program = self.resources.leaf_program(
+                {"LEAF_INSTANCED": 1, **feature_defines(recs), **(PLAIN_DEFINES if plain else texture_defines(recs))},
+                varyings=WORLD_VARYINGS)
             self.ssbo = self._own(ctx.buffer(recs.tobytes() if self.count else bytes(LEAF_BLOCK.nbytes)))
             self.resources.prepare.run(self.ssbo, self.count)  # derived per-leaf fields, one dispatch
             self.rows = self._own(RowTexture(ctx, self.ssbo, self.count)) if needs_row_texture(recs) else None
@@ -221,6 +238,8 @@ class InstancedLeaves(_Batch):
             self.rows.use()
         self.jitter.use()
         self.ripples.bind()
+        if self.textures is not None:
+            self.textures.use()
 
     def draw(self) -> None:
         """All leaves, one instanced draw, into the bound framebuffer (depth test on)."""
@@ -282,7 +301,7 @@ class BakedLeaves(_Batch):
             tris = grid_indices(self.nu, self.nv)
             idx = (tris[None] + (np.arange(n, dtype=np.uint32) * nverts)[:, None, None])
             self.index_count = int(idx.size)
-            self.program = self.resources.baked_program()
+            self.program = self.resources.programs.program("leaf_baked.vert", "leaf.frag", defines=PLAIN_DEFINES)
             self.vbo = self._own(ctx.buffer(verts.tobytes() if n else bytes(vdt.itemsize)))
             self.ibo = self._own(ctx.buffer(idx.astype(np.uint32).tobytes() if n else bytes(12)))
             self.vao = self._own(ctx.vertex_array(self.program, [(self.vbo, _BAKED_FORMAT, *_BAKED_ATTRS)],

@@ -11,8 +11,8 @@
   ``#define LEAVES_BINDING 2`` etc., so GLSL writes ``layout(std430, binding = LEAVES_BINDING)``
   and Python binds with the same constant; no other file holds a binding number.
 * **Packed fields**: spare vec4 components that hold a number of their own (the drawn half in
-  ``back.w``, the signal row in ``deform.w``, the silhouette row count in ``tilt.w``...) are
-  declared as :data:`LEAF_SLOTS`. GLSL reads them through generated accessors
+  ``back.w``, the signal row in ``deform.w``, the silhouette row count in ``tilt.w``, the texture
+  layers in the model matrix's last row...) are declared as :data:`LEAF_SLOTS`. GLSL reads them through generated accessors
   (``leaf_half(rec)``); Python writes and reads them through :func:`write_slot` /
   :func:`read_slot`, the numpy twins the readback test compares with.
 
@@ -29,8 +29,9 @@ bindings against :data:`BINDINGS`, and every accessor against its numpy twin.
 
 from __future__ import annotations
 
-from collections.abc import Container, Iterable
+from collections.abc import Container, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -38,6 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.blade import APEX, BASE, JITTER_TABLE_SIZE, jitter_table
 from leafview.core.params import MAX_SILHOUETTE_ROWS, LeafParams
+from leafview.core.texture import LeafTexture
 from leafview.deform.beam import BEND_SAMPLES, bend_profile
 from leafview.deform.fbm import RIPPLE_SAMPLES
 
@@ -45,9 +47,10 @@ __all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "SPECIES_CULL_BLOCK", "DRAW_COM
            "Binding", "BINDINGS", "binding_defines", "bindings_glsl",
            "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "SIGNALS_BINDING", "SPECIES_OF_BINDING",
            "SPECIES_BINDING", "COMMANDS_BINDING", "VISIBLE_BINDING", "FBM_JOBS_BINDING", "READBACK_BINDING",
-           "VERTICES_BINDING", "JITTER_UNIT", "ATLAS_UNIT", "ROWS_UNIT",
+           "VERTICES_BINDING", "JITTER_UNIT", "ATLAS_UNIT", "ROWS_UNIT", "TEXTURE_UNIT",
            "Slot", "LEAF_SLOTS", "BRANCH_RIPPLE", "BRANCH_BEND", "BRANCH_ROWS", "branch_code", "without_derived", "PAIR_MEMBERS", "read_slot", "write_slot", "read_pair", "accessors_glsl",
            "struct_from_dtype", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources",
+           "texture_keys", "texture_layers", "write_texture_layers", "texture_defines", "PLAIN_DEFINES",
            "AovOutput", "AOV_OUTPUTS", "LEAF_OFFSET_UNIFORM", "aov_outputs_glsl",
            "LEAF_VERTEX_BLOCK", "LeafAttribute", "LEAF_ATTRIBUTES", "MAX_VERTEX_ATTRIBUTES", "attribute_format",
            "attributes_glsl", "vertex_records", "ROW_TEXELS", "ROWS_PER_LINE", "MAX_TEXTURE_SIZE", "row_texture_size",
@@ -202,6 +205,7 @@ VERTICES_BINDING = 10    # storage Vertices: LeafVertex records of a scene's vis
 JITTER_UNIT = 0          # sampler jitter_table: jitter rows, one per seed
 ATLAS_UNIT = 1           # sampler atlas: Dear ImGui's font atlas or user image
 ROWS_UNIT = 2            # sampler leaf_rows: LeafData rows as texels (the optional branches' members)
+TEXTURE_UNIT = 3         # sampler leaf_textures: the leaves' image textures, one array layer per file
 
 
 @dataclass(frozen=True)
@@ -231,6 +235,7 @@ BINDINGS: tuple[Binding, ...] = (
     Binding("JITTER_UNIT", JITTER_UNIT, "sampler", "jitter_table", "jitter rows"),
     Binding("ATLAS_UNIT", ATLAS_UNIT, "sampler", "atlas", "imgui texture"),
     Binding("ROWS_UNIT", ROWS_UNIT, "sampler", "leaf_rows", "LeafData rows as texels"),
+    Binding("TEXTURE_UNIT", TEXTURE_UNIT, "sampler", "leaf_textures", "leaf image textures (leafview/gpu/textures.py)"),
 )
 
 
@@ -260,9 +265,10 @@ def bindings_glsl() -> str:
 # -- packed fields ------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Slot:
-    """A number packed into one component of a LeafData member. GLSL reads it as
-    ``accessor(rec)`` (a macro, so that reading one float of a storage-buffer row never copies
-    the whole struct); ``kind`` is the GLSL type it reads as (``float``, ``int`` or ``bool``)."""
+    """A number packed into one component of a LeafData member (of column ``column`` of a mat4
+    member). GLSL reads it as ``accessor(rec)`` (a macro, so that reading one float of a
+    storage-buffer row never copies the whole struct); ``kind`` is what it reads as: ``float``,
+    ``int``, ``bool``, or ``layer``, an int stored plus one (-1, "none", is stored as 0)."""
 
     accessor: str
     member: str
@@ -270,10 +276,25 @@ class Slot:
     kind: str
     doc: str = ""
     derived: bool = False  # written by a GPU pass (``set_<accessor>(rec, value)``), not by the packer
+    column: int | None = None  # the column of a mat4 member
+
+    @property
+    def index(self) -> tuple[int, ...]:
+        """Index of the component in the member's numpy field (after the record axes)."""
+        return (self.component,) if self.column is None else (self.column, self.component)
+
+    def view(self, records: Any) -> NDArray[Any]:
+        """The component in ``records`` (one record or an array of them), as a writable view."""
+        field = records[self.member]
+        if self.column is None:
+            return field[..., self.component]
+        return field[..., self.column, self.component]
 
     def glsl(self) -> str:
-        read = f"(rec).{self.member}.{'xyzw'[self.component]}"
-        expr = {"float": read, "int": f"int({read})", "bool": f"({read} > 0.0)"}[self.kind]
+        column = "" if self.column is None else f"[{self.column}]"
+        read = f"(rec).{self.member}{column}.{'xyzw'[self.component]}"
+        expr = {"float": read, "int": f"int({read})", "bool": f"({read} > 0.0)",
+                "layer": f"(int({read}) - 1)"}[self.kind]
         line = f"#define {self.accessor}(rec) ({expr})  // {self.doc}"
         if self.derived:
             line += f"\n#define set_{self.accessor}(rec, value) ({read} = float(value))"
@@ -281,8 +302,10 @@ class Slot:
 
     def row_glsl(self) -> str:
         """``ROW_<accessor>``: the same number of the branch record (see :func:`row_glsl`)."""
-        read = f"ROW_{self.member}.{'xyzw'[self.component]}"
-        expr = {"float": read, "int": f"int({read})", "bool": f"({read} > 0.0)"}[self.kind]
+        column = "" if self.column is None else f"[{self.column}]"
+        read = f"ROW_{self.member}{column}.{'xyzw'[self.component]}"
+        expr = {"float": read, "int": f"int({read})", "bool": f"({read} > 0.0)",
+                "layer": f"(int({read}) - 1)"}[self.kind]
         return f"#define ROW_{self.accessor} ({expr})"
 
 
@@ -299,6 +322,12 @@ LEAF_SLOTS: tuple[Slot, ...] = (
     Slot("leaf_signal_row", "deform", 3, "int", "row of the ripple signal buffer"),
     Slot("leaf_twist", "bend_axis", 3, "float", "twist at the apex (radians)"),
     Slot("leaf_rows", "tilt", 3, "int", "silhouette rows N of an extended leaf, 0 otherwise"),
+    # the last row of the affine model matrix (0, 0, 0, 1) has room for two: the image texture
+    # layers of the two sides (leafview/gpu/textures.py), -1 untextured. Stored plus one, so that an
+    # untextured leaf's matrix keeps its row (0, 0, 0, 1); leaf.vert multiplies by mat4x3(model).
+    Slot("leaf_front_layer", "model", 3, "layer", "front texture layer, -1 untextured", column=0),
+    Slot("leaf_back_layer", "model", 3, "layer", "back texture layer (the front's without a back image)",
+         column=1),
     # spare components of the members read as vertex attributes (LEAF_VERTEX_BLOCK), so that the
     # vertex stage learns which branches a leaf takes, and a scene's vertex record its row,
     # without reading the storage buffer:
@@ -311,14 +340,18 @@ _SLOTS = {slot.accessor: slot for slot in LEAF_SLOTS}
 
 
 def _check_slots(slots: Iterable[Slot]) -> None:
-    places: dict[tuple[str, int], str] = {}
+    places: dict[tuple[str, tuple[int, ...]], str] = {}
     members = {name: glsl for name, glsl, _ in LEAF_BLOCK.members}
     for slot in slots:
-        if members.get(slot.member) != "vec4" or not 0 <= slot.component < 4:
-            raise AssertionError(f"{slot.accessor}: no vec4 member {slot.member!r} component {slot.component}")
-        if (slot.member, slot.component) in places:
-            raise AssertionError(f"{slot.accessor} and {places[slot.member, slot.component]} share a component")
-        places[slot.member, slot.component] = slot.accessor
+        kind = "vec4" if slot.column is None else "mat4"
+        if (members.get(slot.member) != kind or not 0 <= slot.component < 4
+                or not 0 <= (slot.column or 0) < 4 or slot.kind not in ("float", "int", "bool", "layer")):
+            raise AssertionError(f"{slot.accessor}: no {kind} member {slot.member!r} component {slot.index}")
+        if slot.column is not None and (slot.column == 3 or slot.component != 3):
+            raise AssertionError(f"{slot.accessor}: only the last row of a matrix, left of its corner, is spare")
+        if (slot.member, slot.index) in places:
+            raise AssertionError(f"{slot.accessor} and {places[slot.member, slot.index]} share a component")
+        places[slot.member, slot.index] = slot.accessor
 
 
 _check_slots(LEAF_SLOTS)
@@ -333,18 +366,22 @@ PAIR_MEMBERS = {
 def read_slot(records: np.ndarray, accessor: str) -> NDArray[Any]:
     """What the GLSL accessor ``accessor(rec)`` reads, for one record or an array of them."""
     slot = _SLOTS[accessor]
-    raw = np.asarray(records[slot.member])[..., slot.component]
+    raw = np.asarray(slot.view(records))
     if slot.kind == "int":
         return raw.astype(np.int32)   # GLSL int(): truncation towards zero
+    if slot.kind == "layer":
+        return raw.astype(np.int32) - 1
     if slot.kind == "bool":
         return raw > 0.0
     return raw
 
 
-def write_slot(record: np.ndarray, accessor: str, value: float) -> None:
-    """Store ``value`` where the GLSL accessor ``accessor(rec)`` reads it (one record)."""
+def write_slot(record: np.ndarray, accessor: str, value: ArrayLike) -> None:
+    """Store ``value`` where the GLSL accessor ``accessor(rec)`` reads it (one record, or an
+    array of records and one value each)."""
     slot = _SLOTS[accessor]
-    record[slot.member][slot.component] = value
+    stored = np.asarray(value, np.float64) + (1.0 if slot.kind == "layer" else 0.0)
+    slot.view(record)[...] = stored
 
 
 # the branch code (leaf_branches): which optional parts of leaf_eval.glsl a leaf takes
@@ -369,7 +406,7 @@ def without_derived(records: np.ndarray) -> NDArray[Any]:
         out[name] = 0
     for slot in LEAF_SLOTS:
         if slot.derived:
-            out[slot.member][..., slot.component] = 0
+            slot.view(out)[...] = 0
     return out
 
 
@@ -396,10 +433,13 @@ def accessors_glsl() -> str:
     return "\n".join(lines) + "\n"
 
 
-def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: int = 0) -> np.ndarray:
+def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: int = 0,
+              layers: tuple[int, int] = (-1, -1)) -> np.ndarray:
     """Fill a LEAF_BLOCK record from ``params`` (float32, std140 = std430); ``ripple_row`` is the
-    row of the ripple signal buffer holding this leaf's ``(seed, beta)`` signal. Packed fields
-    are written through :func:`write_slot` (the GLSL side reads them with the accessors)."""
+    row of the ripple signal buffer holding this leaf's ``(seed, beta)`` signal, ``layers`` the
+    layers of its front and back images in the draw's array texture (-1: untextured; see
+    :func:`texture_layers`). Packed fields are written through :func:`write_slot` (the GLSL side
+    reads them with the accessors)."""
     rec = LEAF_BLOCK.zeros() if out is None else out
     s, j, m = params.shape, params.jitter, params.material
     rec["a1"][:3] = s.a1
@@ -432,6 +472,7 @@ def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: 
     rec["back"][:3] = m.back
     write_slot(rec, "leaf_half", float(params.shape.half))
     rec["model"] = params.transform.matrix().T  # column-major for GLSL
+    write_texture_layers(rec, layers)           # the matrix's last row (after the matrix itself)
     rip, bend = params.ripple, params.bending
     write_slot(rec, "leaf_ripple_on", float(rip.enabled))
     write_slot(rec, "leaf_bend_on", float(bend.active))
@@ -470,6 +511,68 @@ def feature_defines(records: np.ndarray) -> dict[str, int]:
     return defines
 
 
+def texture_defines(records: np.ndarray) -> dict[str, int]:
+    """``LEAF_NO_TEXTURE`` when no record of a draw is textured: ``leaf.frag`` then has no texture
+    lookup and no ``discard`` (which would cost llvmpipe its early depth test). Apart from
+    :func:`feature_defines`, whose permutations cover the vertex stage only."""
+    recs = np.atleast_1d(records)
+    return {} if (read_slot(recs, "leaf_front_layer") >= 0).any() else dict(PLAIN_DEFINES)
+
+
+PLAIN_DEFINES: Mapping[str, int] = MappingProxyType({"LEAF_NO_TEXTURE": 1})
+"""The define of a draw with no image texture bound (baked leaves, stems, batches given none)."""
+
+
+def texture_keys(params: Iterable[LeafParams]) -> list[str]:
+    """The distinct image files (resolved paths) of the textured leaves among ``params``, front
+    before back, in order of first use: layer i of their array texture holds ``keys[i]`` (the
+    layers :func:`texture_layers` and :func:`pack_leaves` assign). Resolving can raise
+    :class:`~leafview.errors.ParamError` (a path leaving its folder);
+    :mod:`leafview.gpu.textures` checks the files first, naming the leaf."""
+    keys: dict[str, int] = {}
+    memo: dict[tuple[str, str, str], tuple[str, str | None]] = {}
+    for p in params:
+        if p.texture is not None:
+            for path in _texture_files(p.texture, memo):
+                if path is not None:
+                    keys.setdefault(path, len(keys))
+    return list(keys)
+
+
+def _texture_files(texture: LeafTexture, memo: dict[tuple[str, str, str], tuple[str, str | None]]
+                   ) -> tuple[str, str | None]:
+    """The resolved front and back files of ``texture`` (resolved once per folder and paths in
+    ``memo``: the leaves of a leaf set often share them)."""
+    key = (texture.folder, texture.front, texture.back)
+    found = memo.get(key)
+    if found is None:
+        front, back = texture.paths()
+        found = memo[key] = (str(front), None if back is None else str(back))
+    return found
+
+
+def texture_layers(params: Sequence[LeafParams], keys: Sequence[str] | None = None) -> NDArray[np.int32]:
+    """(N, 2) front and back layer of each leaf in an array texture holding ``keys`` (default
+    :func:`texture_keys` of ``params``): -1 for an untextured leaf; the front's layer for the back
+    of a leaf without a back image."""
+    index = {key: i for i, key in enumerate(texture_keys(params) if keys is None else keys)}
+    out = np.full((len(params), 2), -1, np.int32)
+    memo: dict[tuple[str, str, str], tuple[str, str | None]] = {}
+    for i, p in enumerate(params):
+        if p.texture is not None:
+            front, back = _texture_files(p.texture, memo)
+            out[i, 0] = index[front]
+            out[i, 1] = out[i, 0] if back is None else index[back]
+    return out
+
+
+def write_texture_layers(records: np.ndarray, layers: ArrayLike) -> None:
+    """Store (front, back) ``layers`` (one pair, or (N, 2) for N records) in the records' slots."""
+    pairs = np.asarray(layers, np.int32)
+    write_slot(records, "leaf_front_layer", pairs[..., 0])
+    write_slot(records, "leaf_back_layer", pairs[..., 1])
+
+
 def ripple_keys(params: Iterable[LeafParams]) -> list[tuple[int, float]]:
     """The distinct ``(seed, beta)`` ripple signals of leaves with ripples on, in order of first
     use: row i of the signal buffer holds ``keys[i]`` (the rows :func:`pack_leaves` assigns)."""
@@ -480,17 +583,21 @@ def ripple_keys(params: Iterable[LeafParams]) -> list[tuple[int, float]]:
     return list(keys)
 
 
-def pack_leaves(params: Iterable[LeafParams]) -> tuple[NDArray[Any], NDArray[np.float32]]:
+def pack_leaves(params: Iterable[LeafParams], *, textures: Sequence[str] | None = None
+                ) -> tuple[NDArray[Any], NDArray[np.float32]]:
     """LEAF_BLOCK records (N,) for ``params`` and the jitter table rows they index: one row of
     :data:`JITTER_TABLE_SIZE` values per distinct seed among leaves with jitter on (at least one
-    row). ``leaf_jitter_row`` of each record is its row."""
+    row). ``leaf_jitter_row`` of each record is its row; the texture layers are those of an array
+    texture holding ``textures`` (default :func:`texture_keys` of ``params``)."""
     params = list(params)
     recs = np.zeros(len(params), dtype=LEAF_BLOCK.dtype)
     rows: dict[int, int] = {}
     tables: list[NDArray[np.float32]] = []
     ripple_rows = {key: row for row, key in enumerate(ripple_keys(params))}
+    layers = texture_layers(params, textures)
     for i, p in enumerate(params):
-        pack_leaf(p, recs[i], ripple_row=ripple_rows.get((p.ripple.seed, p.ripple.beta), 0))
+        pack_leaf(p, recs[i], ripple_row=ripple_rows.get((p.ripple.seed, p.ripple.beta), 0),
+                  layers=(int(layers[i, 0]), int(layers[i, 1])))
         if p.jitter.enabled:
             row = rows.get(p.jitter.seed)
             if row is None:

@@ -4,8 +4,9 @@ atlas, and the transform-feedback capture that tests and export read back.
 
 Programs, grids, render targets and the capture come from a :class:`~leafview.gpu.resources.
 GpuResources` set (shared with other renderers through ``resources=``, else owned); this
-renderer owns only its leaf and frame blocks, batch rows, jitter rows and ripple signals, and
-releases them in :meth:`LeafRenderer.release` (or a ``with`` block).
+renderer owns only its leaf and frame blocks, batch rows, jitter rows, ripple signals and image
+textures (:class:`~leafview.gpu.textures.LeafTextures`), and releases them in
+:meth:`LeafRenderer.release` (or a ``with`` block).
 """
 
 from __future__ import annotations
@@ -31,7 +32,10 @@ from leafview.gpu.layout import (
     feature_defines,
     pack_leaf,
     pack_leaves,
+    read_slot,
     ripple_keys,
+    texture_defines,
+    texture_layers,
 )
 from leafview.gpu.limits import (
     MAX_RESOURCE_BYTES,
@@ -48,6 +52,7 @@ from leafview.gpu.owner import GLObjects, GrowingBuffer
 from leafview.gpu.prepare import LeafPrepare
 from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, JitterTable
 from leafview.gpu.targets import unpremultiply
+from leafview.gpu.textures import LeafTextures, check_textures
 from leafview.scene.camera import VIEWS, Camera, frame_view
 
 __all__ = ["LeafRenderer", "DEFAULT_GRID", "BATCH", "Lighting", "fill_frame"]
@@ -56,7 +61,7 @@ BATCH = 64            # leaves per atlas in render_many
 _MAX_ATLAS = 4096     # atlas side limit in pixels (well inside GL_MAX_RENDERBUFFER_SIZE)
 
 # what a thumbnail captures of each vertex and then draws from: world position, world normal
-# (as leaf.vert computes them) and the drawn (u, v) that leaf.frag's midrib reads
+# (as leaf.vert computes them) and the drawn (u, v) that leaf.frag's midrib and textures read
 DRAW_VARYINGS = (*WORLD_VARYINGS, "v_uv")
 DRAW_VERTEX_FORMAT = "3f 3f 2f"
 DRAW_VERTEX_BYTES = 32
@@ -97,6 +102,7 @@ class LeafRenderer:
             self.program = self.leaf_program({})  # every feature: set_leaf/draw/capture and the viewer
             self.ripples = self._objects.own(self.resources.ripple_pass())
             self.jitter = self._objects.own(JitterTable(self.ctx))
+            self.textures = self._objects.own(LeafTextures(self.ctx))
             self.leaf_ubo = self._objects.own(self.ctx.buffer(reserve=LEAF_BLOCK.nbytes))
             self.frame = self._objects.own(FrameUniforms(self.ctx))
             self._batch_leaf = self._objects.own(GrowingBuffer(self.ctx))
@@ -139,15 +145,23 @@ class LeafRenderer:
         return self.resources.prepare
 
     # -- state ----------------------------------------------------------------------------------
-    def set_leaf(self, params: LeafParams) -> None:
+    def set_leaf(self, params: LeafParams, *, textures: bool = True) -> None:
         """Upload the leaf's uniform block (under 1 KiB), refresh its derived constants (one
-        compute dispatch) and, if its seed changed, its jitter row.
+        compute dispatch) and, if its seed changed, its jitter row; with ``textures``, its image
+        textures when their files changed (a missing or unreadable one raises ParamError first).
 
         Changing jitter amplitude or density only changes the block: nothing is rebuilt.
         """
+        layers = (-1, -1)
+        if textures and params.texture is not None:
+            before = self.textures.uploads
+            keys = self.textures.update([params])
+            self.uploads += self.textures.uploads - before
+            front, back = texture_layers([params], keys)[0]
+            layers = (int(front), int(back))
         if params.ripple.enabled:  # re-synthesises only when seed or β changed
             self.ripples.update([(params.ripple.seed, params.ripple.beta)])
-        pack_leaf(params, self._leaf)
+        pack_leaf(params, self._leaf, layers=layers)
         self.leaf_ubo.write(self._leaf.tobytes())
         self.uploads += LEAF_BLOCK.nbytes
         self.prepare.run(self.leaf_ubo, 1)
@@ -166,6 +180,7 @@ class LeafRenderer:
     def _bind_tables(self) -> None:
         self.jitter.use()
         self.ripples.bind()
+        self.textures.use()
 
     def leaf_program(self, defines: Mapping[str, object]) -> moderngl.Program:
         """The leaf program for a feature set (see ``feature_defines``), compiled once."""
@@ -191,21 +206,21 @@ class LeafRenderer:
 
     def render(self, params: LeafParams, size: Any = (256, 256), view: str = "top",
                background: ArrayLike | None = None, *, grid: tuple[int, int] = DEFAULT_GRID,
-               samples: int | None = None, linear: bool = False) -> NDArray[Any]:
+               samples: int | None = None, linear: bool = False, flat: bool = False) -> NDArray[Any]:
         """Render ``params`` offscreen; (h, w, 4) uint8 sRGB, or float32 linear if ``linear``.
 
         ``background=None`` leaves alpha 0 around the leaf; leaf pixels have alpha 255 (1.0),
         partial at multisampled edges (straight alpha in uint8, premultiplied in float).
-        ``samples`` defaults to 0 for ``top`` and 4 otherwise. A batch of one of
-        :meth:`render_many`.
+        ``samples`` defaults to 0 for ``top`` and 4 otherwise; ``flat``: unlit colours (tests). A
+        batch of one of :meth:`render_many`.
         """
         return self.render_many([params], size, view, background, grid=grid, samples=samples,
-                                linear=linear)[0]
+                                linear=linear, flat=flat)[0]
 
     def render_many(self, leaves: Sequence[LeafParams], size: Any = (256, 256), view: str = "top",
                     background: ArrayLike | None = None, *, grid: tuple[int, int] = DEFAULT_GRID,
                     samples: int | None = None, linear: bool = False,
-                    camera: Camera | None = None) -> list[NDArray[Any]]:
+                    camera: Camera | None = None, flat: bool = False) -> list[NDArray[Any]]:
         """Render several leaves, each framed on its own, in few GPU round trips.
 
         The vertex shader runs once per grid vertex: every leaf's world-space vertices are
@@ -214,6 +229,11 @@ class LeafRenderer:
         fragment shader), resolved and read back once per chunk of up to :data:`BATCH` leaves.
         ``camera`` (from :func:`leafview.scene.camera.frame_view`) replaces the per-leaf framing with one
         camera for all (frame sequences that must not jump in scale); ``view`` still names it.
+        ``flat``: unlit colours (tests).
+
+        Textured leaves: every texture file is read (and checked: a missing or unreadable one raises
+        :class:`~leafview.errors.ParamError` naming the leaf and the file) before anything is drawn;
+        each chunk's files are one array texture (:mod:`leafview.gpu.textures`).
         """
         w, h = _check_size(size)
         if view not in VIEWS:
@@ -235,22 +255,24 @@ class LeafRenderer:
             check_image(self.limits, (c * w, -(-first // c) * h), samples, linear=linear)
             check_memory(len(leaves) * w * h * (16 if linear else 4), "leaves",
                          f"{len(leaves):,} images of {w}×{h}")
+        check_textures(leaves)
         images: list[NDArray[Any]] = []
         for start in range(0, len(leaves), chunk):
             images += self._render_chunk(leaves[start:start + chunk], w, h, view, bg, (nu, nv), samples,
-                                         linear, cols, camera)
+                                         linear, cols, camera, flat)
         return images
 
     def _render_chunk(self, leaves: Sequence[LeafParams], w: int, h: int, view: str,
                       bg: tuple[float, float, float, float],
                       grid: tuple[int, int], samples: int, linear: bool, max_cols: int,
-                      camera: Camera | None = None) -> list[NDArray[Any]]:
+                      camera: Camera | None = None, flat: bool = False) -> list[NDArray[Any]]:
         """One vertex pass: every leaf's grid is evaluated once by ``leaf.vert`` and captured in
         world space (position, normal, drawn (u, v)), each camera is framed on exactly those
         vertices, and the tiles are drawn from the captured buffer itself with the baked-mesh
         program (the same ``leaf.frag``), one indirect draw a leaf; one readback."""
         n = len(leaves)
-        records, tables = pack_leaves(leaves)
+        files = self.textures.update(leaves)
+        records, tables = pack_leaves(leaves, textures=files)
         self.jitter.upload(tables)
         keys = ripple_keys(leaves)
         if keys:
@@ -272,13 +294,13 @@ class LeafRenderer:
                 rec.add(points, nverts)
             frames = np.zeros(n, dtype=FRAME_BLOCK.dtype)
             if camera is not None:
-                fill_frame(frames[0], camera, srgb=not linear)
+                fill_frame(frames[0], camera, srgb=not linear, flat=flat)
                 frames[1:] = frames[0]
             else:
                 world = rec.records()[:, :3].reshape(n, nverts, 3)
                 for i in range(n):
                     fill_frame(frames[i], frame_view(view, world[i].astype(np.float64), (w, h)),
-                               srgb=not linear)
+                               srgb=not linear, flat=flat)
             frame_rows, frame_stride = self._write_records(self._batch_frame, frames)
             colours = self._batch_colour.write(_leaf_colours(records))
             commands = self._batch_commands.write(_draw_commands(n, geometry.triangles * 3, nverts))
@@ -291,10 +313,13 @@ class LeafRenderer:
             self.ctx.scissor = None
             target.clear(bg)
             self.ctx.enable_only(moderngl.DEPTH_TEST)
+            baked = self.resources.programs.program("leaf_baked.vert", "leaf.frag", defines=texture_defines(records))
+            layers = "in_layers" in baked
             vao = self.ctx.vertex_array(
-                self.resources.baked_program(),
+                baked,
                 [(rec.buffer, DRAW_VERTEX_FORMAT, "in_position", "in_normal", "in_uv"),
-                 (colours, "4f 4f/i", "in_front", "in_back")],
+                 (colours, "4f 4f 2f/i" if layers else "4f 4f 8x/i", "in_front", "in_back",
+                  *(("in_layers",) if layers else ()))],
                 index_buffer=geometry.ibo, index_element_size=4)
             try:
                 for i in range(n):
@@ -339,7 +364,7 @@ class LeafRenderer:
             return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)
         check_buffer(capture_bytes(n), "u, v", f"capturing {n:,} points")
         ensure_alive(self.ctx, "capturing")
-        self.set_leaf(params)
+        self.set_leaf(params, textures=False)   # positions only: no image read
         self._bind()
         program = self.program if defines is None else self.leaf_program(defines)
         vbo = self.ctx.buffer(uv.tobytes())
@@ -352,8 +377,10 @@ class LeafRenderer:
 
 
 def _leaf_colours(records: NDArray[Any]) -> NDArray[np.float32]:
-    """Per-leaf attributes of the thumbnail draw: front (rgb, translucency) and back colours."""
-    return np.ascontiguousarray(np.concatenate([records["front"], records["back"]], axis=1), np.float32)
+    """Per-leaf attributes of the thumbnail draw: front (rgb, translucency) and back colours, and
+    the texture layers plus one (``in_layers`` of leaf_baked.vert; 0 untextured)."""
+    layers = np.stack([read_slot(records, "leaf_front_layer"), read_slot(records, "leaf_back_layer")], axis=1) + 1
+    return np.ascontiguousarray(np.concatenate([records["front"], records["back"], layers], axis=1), np.float32)
 
 
 def _draw_commands(n: int, indices: int, vertices: int) -> NDArray[Any]:

@@ -15,6 +15,10 @@ Per frame, for each batch of leaves:
    reads the record as per-instance vertex attributes, and the row (for ripples, bends and
    extended silhouettes, and the label pass's leaf index) through the record's ``leaf_vertex_row``.
 
+Textured species (:mod:`leafview.gpu.textures`) share one array texture, a layer per image
+file, bound for the whole scene: each record carries its layers, so they draw in the same
+indirect multi-draws as plain species.
+
 No per-leaf work happens on the CPU after the scene is uploaded. Leaf rows are
 :data:`~leafview.gpu.layout.LEAF_BLOCK` records (the same declaration as the single-leaf uniform
 block); a batch holds at most ``GL_MAX_SHADER_STORAGE_BLOCK_SIZE`` bytes of them, so large scenes
@@ -47,6 +51,7 @@ from leafview.gpu.layout import (
     LEAF_OFFSET_UNIFORM,
     LEAF_VERTEX_BLOCK,
     LEAVES_BINDING,
+    PLAIN_DEFINES,
     SPECIES_BINDING,
     SPECIES_CULL_BLOCK,
     SPECIES_OF_BINDING,
@@ -56,11 +61,15 @@ from leafview.gpu.layout import (
     needs_row_texture,
     pack_leaves,
     ripple_keys,
+    texture_defines,
+    texture_layers,
     write_slot,
+    write_texture_layers,
 )
 from leafview.gpu.limits import check_scene, ensure_alive
 from leafview.gpu.owner import GLObjects
 from leafview.gpu.resources import GpuResources, JitterTable, RowTexture, record_vertex_array
+from leafview.gpu.textures import LeafTextures
 from leafview.resources import resolve_preset
 from leafview.scene.camera import Camera, top_down
 from leafview.scene.spec import Scene, SceneSpec
@@ -86,7 +95,9 @@ def species_tables(scene: Scene) -> tuple[NDArray[Any], NDArray[np.float32], lis
     a species per leaf) share one *template* record, packed once; each species' Ω and colours then
     go straight into its row, vectorised, and the bend profiles of the bent ones are solved
     together, once per distinct shape, bending and frame (:func:`leafview.deform.beam.bend_profiles`).
-    An extended silhouette is a template of its own (its further rows depend on its whole shape)."""
+    An extended silhouette is a template of its own (its further rows depend on its whole shape).
+    Each species' texture layers are those of :func:`~leafview.gpu.layout.texture_keys` of the
+    species (the array texture :class:`SceneRenderer` binds)."""
     index: dict[tuple[Any, ...], int] = {}
     by_identity: dict[tuple[int, ...], int] = {}   # the same objects (shared by the species) hash once
     templates: list[LeafParams] = []
@@ -118,6 +129,7 @@ def species_tables(scene: Scene) -> tuple[NDArray[Any], NDArray[np.float32], lis
         col = np.asarray(values, np.float64).astype(np.float32)
         for j, name in enumerate(("a1", "a2", "vbar", "xs", "zs", "zf", "zg", "front", "back")):
             recs[name][:, :3] = col[:, 3 * j:3 * j + 3]
+        write_texture_layers(recs, texture_layers(scene.species))
     if bent:
         first: dict[int, int] = {}                 # bend problem -> the first species that poses it
         for i, b in bent:
@@ -177,7 +189,8 @@ def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
         colours = _vec4_run(part, ("front", "back"))[:, :, :3]
         colours *= scene.tint[start + a:start + b, None, None].astype(np.float32)
         np.clip(colours, np.float32(0.0), np.float32(1.0), out=colours)
-        part["model"] = np.transpose(scene.matrices[start + a:start + b], (0, 2, 1))
+        # rows 0-2 of each column: the last row (0, 0, 0, 1) keeps the species' texture layers (LEAF_SLOTS)
+        part["model"][:, :, :3] = np.transpose(scene.matrices[start + a:start + b, :3], (0, 2, 1))
     return recs
 
 
@@ -402,8 +415,12 @@ class SceneRenderer:
             self._block_limit = limit
             groups = int(ctx.info["GL_MAX_COMPUTE_WORK_GROUP_COUNT"][0])
             self.plan = plan_batches(len(scene), limit, groups)
+            # the species' image files, read (a missing or unreadable one raises ParamError naming the
+            # leaf and the file) and uploaded as one array texture before any row is packed
+            self.textures = self._objects.own(LeafTextures(ctx))
+            self.textures.update(scene.species)
             self.species_records, table, keys = species_tables(scene)
-            self.program = self.resources.leaf_program({"LEAF_INDIRECT": 1, **feature_defines(self.species_records)})
+            self.program = self.resources.leaf_program({"LEAF_INDIRECT": 1, **self._defines()})
             self.cull = self.resources.programs.compute("scene_cull.comp")
             self.compact = self.resources.programs.compute("scene_compact.comp")
             self.ripples = self._objects.own(self.resources.ripple_pass())
@@ -456,6 +473,10 @@ class SceneRenderer:
         bounds = LeafBounds(self.ctx, self.resources.programs, self.resources.prepare, self.grids)
         return bounds.run(records, self.scene.spec.variation, feature_defines(records), block_limit=self._block_limit)
 
+    def _defines(self) -> dict[str, int]:
+        """The feature defines of this scene's leaf programs (vertex branches, textures)."""
+        return {**feature_defines(self.species_records), **texture_defines(self.species_records)}
+
     def _make_stems(self, stems: Any) -> moderngl.VertexArray | None:
         if stems is None or len(stems[2]) == 0:
             return None
@@ -469,7 +490,7 @@ class SceneRenderer:
         vbo = self._objects.own(self.ctx.buffer(verts.tobytes()))
         ibo = self._objects.own(self.ctx.buffer(np.asarray(tris, np.uint32).tobytes()))
         self._stem_buffers = (vbo, ibo)
-        return self._stem_vao(self.resources.baked_program())
+        return self._stem_vao(self.resources.programs.program("leaf_baked.vert", "leaf.frag", defines=PLAIN_DEFINES))
 
     def _stem_vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
         assert self._stem_buffers is not None
@@ -492,15 +513,14 @@ class SceneRenderer:
         key = tuple(sorted((str(k), str(v)) for k, v in defines.items()))
         found = self._variants.get(key)
         if found is None:
-            prog = self.resources.leaf_program({"LEAF_INDIRECT": 1, **feature_defines(self.species_records),
-                                                **defines})
+            prog = self.resources.leaf_program({"LEAF_INDIRECT": 1, **self._defines(), **defines})
             vaos = [self._objects.own(record_vertex_array(self.ctx, prog, self.uv_vbo, b.vertices, LEAF_VERTEX_BLOCK,
                                                           self.ibo))
                     for b in self.batches]
             stems = None
             if self._stem_buffers is not None:
                 stems = self._stem_vao(self.resources.programs.program(
-                    "leaf_baked.vert", "leaf.frag", defines={**defines, "LEAF_STEMS": 1}))
+                    "leaf_baked.vert", "leaf.frag", defines={**defines, **PLAIN_DEFINES, "LEAF_STEMS": 1}))
             found = self._variants[key] = (prog, vaos, stems)
         return found
 
@@ -558,6 +578,7 @@ class SceneRenderer:
         self.frame.bind()
         self.jitter.use()
         self.ripples.bind()
+        self.textures.use()
 
     def draw(self, settings: CullSettings = CullSettings(), *, defines: Mapping[str, object] | None = None) -> None:
         """Cull and draw every batch (and the stems) into the bound framebuffer. A context
@@ -647,10 +668,10 @@ class SceneRenderer:
         return out
 
     def render(self, camera: Camera, size: tuple[int, int], settings: CullSettings = CullSettings(), *,
-               samples: int = 4, background: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
-               ) -> NDArray[np.uint8]:
+               samples: int = 4, background: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0),
+               flat: bool = False) -> NDArray[np.uint8]:
         """One frame offscreen: (h, w, 4) uint8 RGBA, row 0 at the top (a render target of the
-        shared resources, resolved when multisampled)."""
+        shared resources, resolved when multisampled); ``flat``: unlit colours (tests)."""
         ctx = self.ctx
         size = (int(size[0]), int(size[1]))
         ensure_alive(ctx, "rendering a scene")
@@ -659,6 +680,8 @@ class SceneRenderer:
         ctx.viewport = (0, 0, *size)
         target.clear(background)
         self.set_camera(camera, size)
+        if flat:   # the same frame, lighting off
+            self.frame.set_camera(camera, flat=True)
         self.draw(settings)
         image: NDArray[np.uint8] = target.read()
         check_error(ctx, "scene frame")

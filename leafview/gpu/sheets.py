@@ -21,6 +21,7 @@ from leafview.gpu.instanced import InstancedLeaves
 from leafview.gpu.layout import pack_leaves, ripple_keys
 from leafview.gpu.renderer import LeafRenderer
 from leafview.gpu.targets import unpremultiply
+from leafview.gpu.textures import LeafTextures
 from leafview.scene.camera import Camera, frame_view
 
 __all__ = ["render_leaves", "render_lobed"]
@@ -41,20 +42,25 @@ def render_leaves(leaves: Sequence[LeafParams], size: tuple[int, int] = (256, 25
     if samples is None:
         samples = 0 if view == "top" else 4
     samples = min(samples, ctx.max_samples)
-    records, tables = pack_leaves(leaves)
-    with InstancedLeaves(ctx, records, grid, jitter_tables=tables, ripple_signals=ripple_keys(leaves),
-                         resources=resources) as inst:
-        pos, _ = inst.capture()
-        if camera is None:
-            camera = frame_view(view, pos.reshape(-1, 3).astype(np.float64), (w, h))
-        inst.set_camera(camera, flat=flat)
-        target = resources.target((w, h), samples)
-        target.use()
-        target.clear()
-        inst.draw()
-        img: NDArray[np.uint8] = target.read()
-        check_error(ctx, "multilobed leaf")
-        ctx.disable(moderngl.DEPTH_TEST)
+    textures = LeafTextures(ctx)
+    try:
+        keys = textures.update(leaves)        # a missing or unreadable image: refused before anything is drawn
+        records, tables = pack_leaves(leaves, textures=keys)
+        with InstancedLeaves(ctx, records, grid, jitter_tables=tables, ripple_signals=ripple_keys(leaves),
+                             resources=resources, textures=textures) as inst:
+            pos, _ = inst.capture()
+            if camera is None:
+                camera = frame_view(view, pos.reshape(-1, 3).astype(np.float64), (w, h))
+            inst.set_camera(camera, flat=flat)
+            target = resources.target((w, h), samples)
+            target.use()
+            target.clear()
+            inst.draw()
+            img: NDArray[np.uint8] = target.read()
+            check_error(ctx, "multilobed leaf")
+            ctx.disable(moderngl.DEPTH_TEST)
+    finally:
+        textures.release()
     return unpremultiply(img) if samples else img
 
 
