@@ -49,6 +49,7 @@ from leafview.export.gltf import BACK_FACES, INSTANCING_MODES
 from leafview.export.mesh import BACKENDS, DEFAULT_RESOLUTION, check_resolution
 from leafview.export.objply import UP_AXES
 from leafview.export.scene import leaf_scene
+from leafview.export.textures import check_textures
 from leafview.scene.spec import build_scene, load_scene, scene_from_leaves
 
 __all__ = ["add_arguments", "run"]
@@ -218,6 +219,7 @@ def _run(args: argparse.Namespace) -> int:
     opts = _options(args, fmt)
     common = {"resolution": args.resolution, "backend": args.backend, "length_m": args.length_m}
     if mode == "file":
+        check_textures([(names[0] or "leaf", leaves[0].texture)])   # a missing image: refused before the bake
         mesh = bake(leaves[0], args.resolution, backend=args.backend)
         write(leaf_scene(leaves[0], mesh, length_m=args.length_m), out, **opts)
         if not args.quiet:

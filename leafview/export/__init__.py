@@ -4,8 +4,10 @@
 (:mod:`.scene`) and pick the writer from the file suffix (:mod:`.gltf`, :mod:`.objply`,
 :mod:`.usd`). Every option is checked before anything is baked, every file is written through
 :mod:`leafview.atomic` (target checked before the bake, written atomically and verified, a
-failure leaves no file) and non-finite vertices are refused. ``docs/export.md`` has the
-conventions (axes, units, texture coordinates, the two leaf sides).
+failure leaves no file) and non-finite vertices are refused. A textured leaf's images
+(:mod:`.textures`) are found before the bake and written beside the file (OBJ, PLY, USD) or into
+it (glTF), each once. ``docs/export.md`` has the conventions (axes, units, texture coordinates,
+the two leaf sides).
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ from leafview.export.scene import (
     leaves_scene,
     scene_from,
 )
+from leafview.export.textures import check_textures
 from leafview.export.usd import write_usd
 from leafview.gpu import LeafRenderer
 
@@ -146,6 +149,7 @@ def export_leaf(params: LeafParams, path: str | Path, *, resolution: Sequence[in
     _check_options(fmt, options)
     length_m = _check_length(length_m)
     check_target(path)   # a folder that cannot take the file fails before the bake
+    check_textures([(params.name or "leaf", params.texture)])   # and a missing texture file
     mesh = bake(params, resolution, backend=backend, renderer=renderer)
     return write(leaf_scene(params, mesh, length_m=length_m), path, **options)
 

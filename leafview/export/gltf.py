@@ -16,7 +16,18 @@ Layout of a written file:
   world-space copy of the mesh instead, because glTF nodes and instances hold TRS only;
 * materials: metallic 0, base colour = the side's colour, and translucency as
   ``KHR_materials_diffuse_transmission`` (factor = translucency, colour = the side's colour, the
-  same Lambertian transmission term as ``shaders/leaf.frag``).
+  same Lambertian transmission term as ``shaders/leaf.frag``);
+* textured leaves (:mod:`leafview.export.textures`): the image replaces the side's colour
+  (``baseColorFactor`` white, ``pbrMetallicRoughness.baseColorTexture`` on ``TEXCOORD_0`` =
+  :func:`leafview.core.texture.texture_st` of the vertex's (u, v), and the same texture as the
+  transmission colour), ``alphaMode`` MASK with ``alphaCutoff`` 0.5 so the image's alpha cuts
+  the margin out, one sampler (linear, trilinear mipmaps, clamp to edge). The front primitive
+  shows the front image and the back primitive the back image (the front one when the leaf has
+  none); with ``back_faces="double-sided"`` the one double-sided primitive shows the front image
+  only (glTF has no per-face texture). Images are stored in the binary buffer (a buffer view
+  with ``mimeType``) in ``.glb`` and ``.gltf`` alike, so a ``.gltf`` stays one self-contained
+  file; each image file is stored once, and one material per image and side, however many
+  leaves or shapes use it (a textured species' colour variation is not exported).
 
 Buffer views are 4-byte aligned, POSITION accessors carry min/max, indices are unsigned short
 when every index fits below 65535 (the primitive-restart value), else unsigned int.
@@ -37,8 +48,9 @@ from numpy.typing import NDArray
 from leafview._version import __version__
 from leafview.atomic import check_target, write_bytes
 from leafview.errors import UsageError
-from leafview.export.mesh import LeafMesh, check_mesh
-from leafview.export.scene import BARK, TRS, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs
+from leafview.export.mesh import LeafMesh, check_mesh, gltf_st
+from leafview.export.scene import BARK, TRS, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs, scene_textures
+from leafview.export.textures import TextureImage
 
 __all__ = ["BACK_FACES", "INSTANCING_MODES", "Z_UP_TO_Y_UP", "gltf_document", "write_gltf"]
 
@@ -49,6 +61,8 @@ _EXT_INSTANCING = "EXT_mesh_gpu_instancing"
 _EXT_DIFFUSE = "KHR_materials_diffuse_transmission"
 _FLOAT, _USHORT, _UINT = 5126, 5123, 5125
 _ARRAY, _ELEMENTS = 34962, 34963
+_LINEAR, _LINEAR_MIPMAP_LINEAR, _CLAMP_TO_EDGE = 9729, 9987, 33071
+ALPHA_CUTOFF = 0.5      # a texel with alpha below this is cut out of the leaf
 _MAX_GLB = 2**32 - 1
 _TYPES = {1: "SCALAR", 2: "VEC2", 3: "VEC3", 4: "VEC4"}
 
@@ -63,6 +77,7 @@ class _Builder:
         self.used: set[str] = set()
         self.required: set[str] = set()
         self._materials: dict[tuple[Any, ...], int] = {}
+        self._textures: dict[TextureImage, int] = {}
 
     def view(self, data: bytes, target: int | None) -> int:
         self.blob += b"\0" * (-len(self.blob) % 4)
@@ -90,21 +105,39 @@ class _Builder:
         dtype = np.uint16 if n_vertices < 65535 else np.uint32
         return self.accessor(tris.astype(dtype).ravel(), target=_ELEMENTS)
 
+    def texture(self, image: TextureImage) -> int:
+        """The texture of ``image`` (its image and the one sampler made on first use)."""
+        if image not in self._textures:
+            if not self._textures:
+                self.doc["samplers"] = [{"magFilter": _LINEAR, "minFilter": _LINEAR_MIPMAP_LINEAR,
+                                         "wrapS": _CLAMP_TO_EDGE, "wrapT": _CLAMP_TO_EDGE}]
+                self.doc["images"], self.doc["textures"] = [], []
+            self.doc["images"].append({"name": image.name, "bufferView": self.view(image.data, None),
+                                       "mimeType": image.mime})
+            self.doc["textures"].append({"sampler": 0, "source": len(self.doc["images"]) - 1})
+            self._textures[image] = len(self.doc["textures"]) - 1
+        return self._textures[image]
+
     def material(self, name: str, colour: Sequence[float], translucency: float, double_sided: bool,
-                 extras: dict[str, Any]) -> int:
-        key = (name, tuple(colour), translucency, double_sided)
+                 extras: dict[str, Any], image: TextureImage | None = None) -> int:
+        """A material of ``colour``, or of ``image`` (cut out by its alpha) when one is given."""
+        tex = None if image is None else self.texture(image)
+        key = (name, tuple(colour) if tex is None else None, translucency, double_sided, tex)
         if key in self._materials:
             return self._materials[key]
-        mat: dict[str, Any] = {
-            "name": name,
-            "pbrMetallicRoughness": {"baseColorFactor": [*map(float, colour), 1.0], "metallicFactor": 0.0,
-                                     "roughnessFactor": 0.6},
-            "doubleSided": double_sided,
-            "extras": {"leafview": extras},
-        }
+        factor = [*map(float, colour)] if tex is None else [1.0, 1.0, 1.0]
+        pbr: dict[str, Any] = {"baseColorFactor": [*factor, 1.0], "metallicFactor": 0.0, "roughnessFactor": 0.6}
+        mat: dict[str, Any] = {"name": name, "pbrMetallicRoughness": pbr, "doubleSided": double_sided,
+                               "extras": {"leafview": extras}}
+        if tex is not None:
+            pbr["baseColorTexture"] = {"index": tex, "texCoord": 0}
+            mat["alphaMode"], mat["alphaCutoff"] = "MASK", ALPHA_CUTOFF
         if translucency > 0.0:
-            mat["extensions"] = {_EXT_DIFFUSE: {"diffuseTransmissionFactor": float(translucency),
-                                                "diffuseTransmissionColorFactor": [*map(float, colour)]}}
+            diffuse: dict[str, Any] = {"diffuseTransmissionFactor": float(translucency),
+                                       "diffuseTransmissionColorFactor": factor}
+            if tex is not None:
+                diffuse["diffuseTransmissionColorTexture"] = {"index": tex, "texCoord": 0}
+            mat["extensions"] = {_EXT_DIFFUSE: diffuse}
             self.used.add(_EXT_DIFFUSE)
         self.doc["materials"].append(mat)
         self._materials[key] = len(self.doc["materials"]) - 1
@@ -115,13 +148,24 @@ class _Builder:
         return len(self.doc["nodes"]) - 1
 
 
-def _leaf_materials(b: _Builder, part: ExportPart, back_faces: str) -> tuple[int, int | None]:
+def _leaf_materials(b: _Builder, part: ExportPart, back_faces: str,
+                    images: tuple[TextureImage, TextureImage] | None) -> tuple[int, int | None]:
+    """The front and back materials of ``part`` (back None for ``back_faces="double-sided"``),
+    textured with ``images`` (front, back) when the leaf has them."""
     m = part.material
-    extras = {"front": list(m.front), "back": list(m.back), "translucency": m.translucency}
+    extras: dict[str, Any] = {"front": list(m.front), "back": list(m.back), "translucency": m.translucency}
+    front_img: TextureImage | None = None
+    back_img: TextureImage | None = None
+    front_label, back_label = _hex(m.front), _hex(m.back)
+    if images is not None:
+        front_img, back_img = images
+        front_label, back_label = front_img.name, back_img.name
+        extras["texture"] = {"front": front_label, "back": back_label}
     if back_faces == "double-sided":
-        return b.material(f"leaf {_hex(m.front)}", m.front, m.translucency, True, extras), None
-    front = b.material(f"leaf front {_hex(m.front)}", m.front, m.translucency, False, {**extras, "side": "front"})
-    back = b.material(f"leaf back {_hex(m.back)}", m.back, m.translucency, False, {**extras, "side": "back"})
+        return b.material(f"leaf {front_label}", m.front, m.translucency, True, extras, front_img), None
+    front = b.material(f"leaf front {front_label}", m.front, m.translucency, False, {**extras, "side": "front"},
+                       front_img)
+    back = b.material(f"leaf back {back_label}", m.back, m.translucency, False, {**extras, "side": "back"}, back_img)
     return front, back
 
 
@@ -135,9 +179,7 @@ def _mesh(b: _Builder, mesh: LeafMesh, name: str, front_mat: int, back_mat: int 
     v = mesh.n_vertices
     pos = b.accessor(mesh.positions, bounds=True)
     nrm = b.accessor(mesh.normals)
-    st = mesh.st.copy()
-    st[:, 1] = 1.0 - st[:, 1]          # glTF texture space: t runs downwards
-    tex = b.accessor(st)
+    tex = b.accessor(gltf_st(mesh.uv))      # glTF texture space: t runs downwards
     prims = [{"attributes": {"POSITION": pos, "NORMAL": nrm, "TEXCOORD_0": tex},
               "indices": b.indices(mesh.indices, v), "material": front_mat, "mode": 4}]
     if back_mat is not None:
@@ -206,10 +248,11 @@ def gltf_document(scene: ExportScene, *, back_faces: str = "primitive", instanci
         raise UsageError(f"unknown instancing mode {instancing!r} (use {', '.join(INSTANCING_MODES)})")
     if not (np.isfinite(scene.length_m) and scene.length_m > 0):
         raise UsageError(f"length_m must be a positive number of metres, got {scene.length_m!r}")
+    textures = scene_textures(scene)     # every image read and checked before anything is built
     b = _Builder()
     children: list[int] = []
-    for part, trs in zip(scene.parts, parts_trs(scene.parts)):
-        mats = _leaf_materials(b, part, back_faces)
+    for k, (part, trs) in enumerate(zip(scene.parts, parts_trs(scene.parts))):
+        mats = _leaf_materials(b, part, back_faces, textures.of(k))
         mesh_id = _mesh(b, part.mesh, part.name, *mats)
         children += _place(b, part, trs, mesh_id, mats, instancing, instance_threshold)
     if scene.stems is not None:
@@ -235,8 +278,8 @@ def gltf_document(scene: ExportScene, *, back_faces: str = "primitive", instanci
         "extras": {"leafview": {"length_m": scene.length_m, "leaves": scene.n_leaves,
                                 "note": "root node: leafview +z up -> glTF +y up, leaf lengths -> metres"}},
     }
-    for key in ("nodes", "meshes", "materials", "accessors", "bufferViews"):
-        if b.doc[key]:
+    for key in ("nodes", "meshes", "materials", "textures", "images", "samplers", "accessors", "bufferViews"):
+        if b.doc.get(key):
             doc[key] = b.doc[key]
     if b.used:
         doc["extensionsUsed"] = sorted(b.used)

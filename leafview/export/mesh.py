@@ -16,9 +16,11 @@ renderer rasterises nothing for them; an exported file would carry them as degen
 vertices stay as separate copies of the point, each with the normal and texture coordinate of
 its own column (a seam, as at a UV border), so every exported triangle is one the renderer draws.
 
-Texture coordinates. ``st = ((1 - u) / 2, v)``, origin at the lower left: the leaf's (u, v)
-rectangle seen from the top view, left edge u = +1 (the -x half of a straight leaf), right edge
-u = -1, base at the bottom, apex at the top. glTF counts t downwards and stores ``1 - v``.
+Texture coordinates. ``LeafMesh.st`` is the image point of each vertex's (u, v) by the one
+convention of :func:`leafview.core.texture.texture_st`, stored with the origin at the lower left
+as OBJ, PLY and USD expect (s, 1 - t): the leaf's (u, v) rectangle seen from the top view, left
+edge u = +1 (the -x half of a straight leaf), right edge u = -1, base at the bottom, apex at the
+top. glTF counts t downwards and takes ``texture_st`` as it is (:func:`gltf_st`).
 """
 
 from __future__ import annotations
@@ -31,8 +33,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from leafview.core.blade import drawn_uv
 from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.params import LeafParams
+from leafview.core.texture import texture_st
 from leafview.deform.surface import grid_indices, grid_uv, tessellate
 from leafview.errors import NonFiniteMesh, UsageError
 from leafview.gpu import LeafRenderer, default_renderer
@@ -45,6 +49,8 @@ __all__ = [
     "bake",
     "bake_many",
     "check_mesh",
+    "gltf_st",
+    "lower_left_st",
     "pinch_triangles",
 ]
 
@@ -62,9 +68,10 @@ class LeafMesh:
     positions, normals:
         (V, 3) float32; normals are unit length and point to the front (upper, adaxial) side.
     st:
-        (V, 2) float32 texture coordinates ``((1 - u) / 2, v)``, origin lower left.
+        (V, 2) float32 texture coordinates, origin lower left (:func:`lower_left_st` of ``uv``).
     uv:
-        (V, 2) float64, the model's (u, v) of each vertex (for comparisons with the reference).
+        (V, 2) float64, the model's (u, v) of each vertex as drawn (:func:`leafview.core.blade.drawn_uv`:
+        a one-sided leaf's grid spread over its half), for comparisons with the reference.
     indices:
         (T, 3) uint32 triangles, counter-clockwise seen from the front.
     name:
@@ -161,8 +168,21 @@ def _finish(name: str, uv: NDArray[np.float64], pos: Any, nrm: Any, nu: int, nv:
         nrm[off] = repaired
         length = np.linalg.norm(nrm, axis=1)
     nrm = nrm / length[:, None]
-    st = np.stack([(1.0 - uv[:, 0]) * 0.5, uv[:, 1]], axis=1)
-    return LeafMesh(pos.astype(np.float32), nrm.astype(np.float32), st.astype(np.float32), uv, tris, name)
+    return LeafMesh(pos.astype(np.float32), nrm.astype(np.float32), lower_left_st(uv), uv, tris, name)
+
+
+def lower_left_st(uv: NDArray[np.float64]) -> NDArray[np.float32]:
+    """(V, 2) float32 texture coordinates of the (V, 2) leaf points ``uv`` with the origin at the
+    image's lower left (OBJ ``vt``, PLY ``s t``, USD ``primvars:st``): (s, 1 - t) of
+    :func:`~leafview.core.texture.texture_st`."""
+    s, t = texture_st(uv[:, 0], uv[:, 1])
+    return np.stack([s, 1.0 - t], axis=1).astype(np.float32)
+
+
+def gltf_st(uv: NDArray[np.float64]) -> NDArray[np.float32]:
+    """(V, 2) float32 glTF ``TEXCOORD_0`` of the leaf points ``uv``: :func:`~leafview.core.texture.texture_st`
+    as it is (glTF's origin is the image's upper left)."""
+    return np.stack(texture_st(uv[:, 0], uv[:, 1]), axis=1).astype(np.float32)
 
 
 def check_mesh(mesh: LeafMesh) -> None:
@@ -218,7 +238,9 @@ def bake_many(leaves: Iterable[LeafParams], resolution: Sequence[int] = DEFAULT_
         else:
             ref = tessellate(params, nu, nv)  # the same grid_uv order, float64
             pos, nrm = ref.vertices, ref.normals
-        out.append(_finish(params.name, uv, pos, nrm, nu, nv))
+        # the surface parameters drawn (a one-sided leaf spreads the grid over its half), so that
+        # the texture coordinates of both halves of an asymmetric leaf follow texture_st
+        out.append(_finish(params.name, drawn_uv(params, uv), pos, nrm, nu, nv))
         if progress is not None:
             progress(1)
     return out

@@ -24,8 +24,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.limits import MAX_WORLD_COORD
 from leafview.core.params import LeafParams, Material
+from leafview.core.texture import LeafTexture
 from leafview.errors import NonFiniteMesh, UsageError
 from leafview.export.mesh import DEFAULT_RESOLUTION, LeafMesh, bake_many, check_mesh
+from leafview.export.textures import SceneTextures, check_textures, load_textures
 from leafview.gpu import LeafRenderer
 
 __all__ = [
@@ -45,6 +47,7 @@ __all__ = [
     "parts_trs",
     "quat_from_matrix",
     "scene_from",
+    "scene_textures",
 ]
 
 TRS_TOLERANCE = 1e-6   # largest |TRS - M| / max(1, |M|) accepted as a TRS transform
@@ -80,13 +83,15 @@ class SceneLike(Protocol):
 
 @dataclass
 class ExportPart:
-    """One distinct leaf shape: its baked mesh, material and the matrices of its copies."""
+    """One distinct leaf shape: its baked mesh, material, image texture (None: the material's
+    colours) and the matrices of its copies."""
 
     mesh: LeafMesh
     material: Material
     matrices: NDArray[np.float64]          # (K, 4, 4) leaf space -> world
     name: str = ""
     leaf_ids: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    texture: LeafTexture | None = None
 
 
 @dataclass
@@ -101,6 +106,12 @@ class ExportScene:
     @property
     def n_leaves(self) -> int:
         return sum(len(p.matrices) for p in self.parts)
+
+
+def scene_textures(scene: ExportScene) -> SceneTextures:
+    """The images of ``scene``'s textured parts (:func:`leafview.export.textures.load_textures`,
+    indexed like ``scene.parts``), read and checked before a writer writes anything."""
+    return load_textures([(p.name or p.mesh.name or "leaf", p.texture) for p in scene.parts])
 
 
 # -- rotations -------------------------------------------------------------------------------
@@ -228,7 +239,7 @@ def check_world(scene: ExportScene) -> None:
 def leaf_scene(params: LeafParams, mesh: LeafMesh, *, length_m: float = 0.1) -> ExportScene:
     """A single leaf placed by its own ``params.transform``."""
     part = ExportPart(mesh, params.material, params.transform.matrix()[None], params.name or "leaf",
-                      np.zeros(1, np.int64))
+                      np.zeros(1, np.int64), params.texture)
     return ExportScene([part], None, length_m, params.name or "leaf")
 
 
@@ -236,8 +247,9 @@ def leaves_scene(leaves: Sequence[LeafParams], resolution: Sequence[int] = DEFAU
                  backend: str = "gpu", renderer: LeafRenderer | None = None, length_m: float = 0.1,
                  progress: Callable[[int], None] | None = None, name: str = "leaves") -> ExportScene:
     """Several leaves, each at its own transform, each its own mesh."""
+    check_textures((p.name or f"leaf_{i}", p.texture) for i, p in enumerate(leaves))   # before the bake
     meshes = bake_many(leaves, resolution, backend=backend, renderer=renderer, progress=progress)
-    parts = [ExportPart(m, p.material, p.transform.matrix()[None], p.name or f"leaf_{i}", np.array([i]))
+    parts = [ExportPart(m, p.material, p.transform.matrix()[None], p.name or f"leaf_{i}", np.array([i]), p.texture)
              for i, (p, m) in enumerate(zip(leaves, meshes))]
     return ExportScene(parts, None, length_m, name)
 
@@ -288,6 +300,7 @@ def scene_from(scene: SceneLike, resolution: Sequence[int] = DEFAULT_RESOLUTION,
         raise UsageError(f"scene.shape_ids must lie in 0..{len(shapes) - 1}")
     stems = _check_stems(scene.stems)
     used = np.unique(ids) if n else np.zeros(0, np.int64)
+    check_textures((shapes[i].name or f"shape_{i}", shapes[i].texture) for i in used)   # before the bake
     meshes = bake_many([shapes[i] for i in used], resolution, backend=backend, renderer=renderer,
                        progress=progress)
     order = np.argsort(ids, kind="stable")
@@ -297,5 +310,6 @@ def scene_from(scene: SceneLike, resolution: Sequence[int] = DEFAULT_RESOLUTION,
     for sid, mesh, a, b in zip(used, meshes, starts, ends):
         leaf_ids = order[a:b]
         params = shapes[int(sid)]
-        parts.append(ExportPart(mesh, params.material, mats[leaf_ids], params.name or f"shape_{sid}", leaf_ids))
+        parts.append(ExportPart(mesh, params.material, mats[leaf_ids], params.name or f"shape_{sid}", leaf_ids,
+                                params.texture))
     return ExportScene(parts, stems, length_m, name)

@@ -21,6 +21,16 @@ the back colour), as in the glTF export (``back_faces="double-sided"`` writes on
 mesh with the front colour). Translucency has no UsdPreviewSurface input; it is stored on each
 material as the custom attribute ``leafview:translucency`` (with ``leafview:front``/``back``).
 
+Textured leaves (:mod:`leafview.export.textures`): the images are files beside the USD file, each
+written once, named by an asset path relative to the layer (``@./front.png@``). A textured
+side's material is the usual network: a ``UsdPrimvarReader_float2`` reads ``st`` (the mesh's
+``primvars:st``, vertex interpolation, (s, 1 - t) of :func:`leafview.core.texture.texture_st`:
+USD's texture origin is the lower left), a ``UsdUVTexture`` (clamped, sRGB) feeds its ``rgb``
+into ``diffuseColor`` and its alpha ``a`` into ``opacity``, and ``opacityThreshold`` = 0.5 cuts
+the margin out. The front mesh shows the front image, the back mesh the back image (the front
+one when there is none; ``back_faces="double-sided"``: the front image only). One material per
+image and side, whatever the leaves' colours.
+
 PointInstancer copies are stored as positions, ``orientations`` (quath, read by every USD
 version) plus ``orientationsf`` (quatf, full precision, preferred where the schema has it) and
 scales; a copy whose matrix is not TRS (shear) becomes its own Xform with the full matrix.
@@ -36,11 +46,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leafview._version import __version__
-from leafview.atomic import atomic_output, brief, check_target, failed_write
+from leafview.atomic import atomic_output, brief, check_target, failed_write, outputs
 from leafview.errors import OutputError, UsageError
-from leafview.export.gltf import BACK_FACES
+from leafview.export.gltf import ALPHA_CUTOFF, BACK_FACES
 from leafview.export.mesh import LeafMesh, check_mesh
-from leafview.export.scene import BARK, TRS, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs
+from leafview.export.scene import BARK, TRS, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs, scene_textures
+from leafview.export.textures import SceneTextures, TextureImage, write_images
 
 __all__ = ["usd_layer", "write_usd"]
 
@@ -106,18 +117,53 @@ class _Writer:
         spec = self.Sdf.RelationshipSpec(prim, name, False)
         spec.targetPathList.explicitItems = [self.Sdf.Path(t) for t in targets]
 
+    def connect(self, prim: Any, name: str, type_name: Any, source: str) -> None:
+        """An input ``name`` of ``prim`` connected to the attribute ``source``."""
+        self.attr(prim, name, type_name).connectionPathList.explicitItems = [self.Sdf.Path(source)]
+
+    def shader(self, path: str, shader_id: str) -> Any:
+        spec = self.prim(path, "Shader")
+        self.attr(spec, "info:id", self.T.Token, shader_id, uniform=True)
+        return spec
+
+    def image_network(self, material: str, surface: Any, image: str) -> None:
+        """Wire ``surface`` (a UsdPreviewSurface spec) to the texture file ``image`` (beside the
+        layer): rgb into diffuseColor, alpha into opacity, cut at ALPHA_CUTOFF."""
+        T = self.T
+        reader = self.shader(f"{material}/TexCoord", "UsdPrimvarReader_float2")
+        self.attr(reader, "inputs:varname", T.String, "st")
+        self.attr(reader, "outputs:result", T.Float2)
+        tex = self.shader(f"{material}/Image", "UsdUVTexture")
+        self.attr(tex, "inputs:file", T.Asset, self.Sdf.AssetPath(f"./{image}"))
+        self.connect(tex, "inputs:st", T.Float2, f"{material}/TexCoord.outputs:result")
+        for wrap in ("inputs:wrapS", "inputs:wrapT"):
+            self.attr(tex, wrap, T.Token, "clamp")
+        self.attr(tex, "inputs:sourceColorSpace", T.Token, "sRGB")
+        self.attr(tex, "outputs:rgb", T.Float3)
+        self.attr(tex, "outputs:a", T.Float)
+        self.connect(surface, "inputs:diffuseColor", T.Color3f, f"{material}/Image.outputs:rgb")
+        self.connect(surface, "inputs:opacity", T.Float, f"{material}/Image.outputs:a")
+        self.attr(surface, "inputs:opacityThreshold", T.Float, ALPHA_CUTOFF)
+
     # -- content ----------------------------------------------------------------------------
-    def material(self, name: str, colour: Sequence[float], translucency: float, extra: dict[str, Any]) -> str:
-        key = (tuple(colour), translucency, tuple(sorted((k, tuple(v) if isinstance(v, (list, tuple)) else v)
-                                                      for k, v in extra.items())))
+    def material(self, name: str, colour: Sequence[float], translucency: float, extra: dict[str, Any],
+                 image: str | None = None) -> str:
+        """A UsdPreviewSurface material of ``colour``, or of the texture file ``image``."""
+        if image is None:
+            key: tuple[Any, ...] = (tuple(colour), translucency, tuple(sorted(
+                (k, tuple(v) if isinstance(v, (list, tuple)) else v) for k, v in extra.items())))
+        else:
+            key = (image, translucency, extra.get("side"))
         if key in self.materials:
             return self.materials[key]
         Gf, T = self.Gf, self.T
         path = f"{self.looks}/{self.look_names(name)}"
         mat = self.prim(path, "Material")
-        shader = self.prim(f"{path}/PreviewSurface", "Shader")
-        self.attr(shader, "info:id", T.Token, "UsdPreviewSurface", uniform=True)
-        self.attr(shader, "inputs:diffuseColor", T.Color3f, Gf.Vec3f(*map(float, colour)))
+        shader = self.shader(f"{path}/PreviewSurface", "UsdPreviewSurface")
+        if image is None:
+            self.attr(shader, "inputs:diffuseColor", T.Color3f, Gf.Vec3f(*map(float, colour)))
+        else:
+            self.image_network(path, shader, image)
         self.attr(shader, "inputs:roughness", T.Float, 0.6)
         self.attr(shader, "inputs:metallic", T.Float, 0.0)
         self.attr(shader, "outputs:surface", T.Token)
@@ -132,13 +178,16 @@ class _Writer:
         self.materials[key] = path
         return path
 
-    def leaf_materials(self, part: ExportPart) -> tuple[str, str | None]:
+    def leaf_materials(self, part: ExportPart, images: tuple[str, str] | None = None) -> tuple[str, str | None]:
+        """The front and back materials of ``part``, textured by the files ``images`` (front,
+        back) when given."""
         m = part.material
         extra = {"front": m.front, "back": m.back}
+        front_img, back_img = images if images is not None else (None, None)
         if self.back_faces == "double-sided":
-            return self.material("leaf", m.front, m.translucency, extra), None
-        return (self.material("leaf_front", m.front, m.translucency, {**extra, "side": "front"}),
-                self.material("leaf_back", m.back, m.translucency, {**extra, "side": "back"}))
+            return self.material("leaf", m.front, m.translucency, extra, front_img), None
+        return (self.material("leaf_front", m.front, m.translucency, {**extra, "side": "front"}, front_img),
+                self.material("leaf_back", m.back, m.translucency, {**extra, "side": "back"}, back_img))
 
     def mesh(self, path: str, pos: NDArray[np.float32], nrm: NDArray[np.float32], tris: NDArray[np.uint32],
              st: NDArray[np.float32] | None, material: str, *, back: bool = False, double_sided: bool = False) -> None:
@@ -204,13 +253,18 @@ class _Writer:
         self.attr(inst, "scales", T.Float3Array, Vt.Vec3fArray.FromNumpy(np.concatenate(s_all).astype(np.float32)))
 
 
-def usd_layer(scene: ExportScene, path: str | Path, *, back_faces: str = "primitive") -> Any:
-    """Author ``scene`` into a new Sdf layer that will be saved at ``path``."""
+def usd_layer(scene: ExportScene, path: str | Path, *, back_faces: str = "primitive",
+              textures: SceneTextures | None = None, files: dict[TextureImage, str] | None = None) -> Any:
+    """Author ``scene`` into a new Sdf layer that will be saved at ``path``. Textured parts refer
+    to their images (``textures``, read from the scene when not given) by the file names
+    ``files`` (default: each image's own name) beside ``path``; writing them is the caller's."""
     if back_faces not in BACK_FACES:
         raise UsageError(f"unknown back-face mode {back_faces!r} (use {', '.join(BACK_FACES)})")
     if not (np.isfinite(scene.length_m) and scene.length_m > 0):
         raise UsageError(f"length_m must be a positive number of metres, got {scene.length_m!r}")
     _, Sdf, Tf, _ = _pxr()
+    textures = scene_textures(scene) if textures is None else textures
+    files = files or {}
     layer = Sdf.Layer.CreateNew(str(path))
     root_name = Tf.MakeValidIdentifier(scene.name or "leafview")
     root = "/" + root_name
@@ -226,8 +280,10 @@ def usd_layer(scene: ExportScene, path: str | Path, *, back_faces: str = "primit
         names("Leaves")
         names("stems")
         instanced = []
-        for part, trs in zip(scene.parts, parts_trs(scene.parts)):
-            mats = w.leaf_materials(part)
+        for k, (part, trs) in enumerate(zip(scene.parts, parts_trs(scene.parts))):
+            sides = textures.of(k)
+            mats = w.leaf_materials(part, None if sides is None else
+                                    (files.get(sides[0], sides[0].name), files.get(sides[1], sides[1].name)))
             ok = trs[3] <= TRS_TOLERANCE
             if len(part.matrices) >= 2 and ok.sum() >= 2:
                 instanced.append((part, mats, trs))
@@ -247,13 +303,16 @@ def usd_layer(scene: ExportScene, path: str | Path, *, back_faces: str = "primit
 
 
 def write_usd(scene: ExportScene, path: str | Path, *, back_faces: str = "primitive") -> Path:
-    """Write ``scene`` to ``path`` (``.usda`` or ``.usdc``) atomically."""
+    """Write ``scene`` to ``path`` (``.usda`` or ``.usdc``) atomically, with the images of its
+    textured leaves beside it (all files or none)."""
     path = Path(path)
     if path.suffix.lower() not in (".usda", ".usdc", ".usd"):
         raise UsageError(f"{path}: a USD file ends in .usda, .usdc or .usd")
     check_target(path)
-    with atomic_output(path) as tmp:
-        layer = usd_layer(scene, tmp, back_faces=back_faces)
+    textures = scene_textures(scene)       # every image read and checked before anything is written
+    with outputs(), atomic_output(path) as tmp:
+        files = write_images(textures, path.parent)
+        layer = usd_layer(scene, tmp, back_faces=back_faces, textures=textures, files=files)
         try:
             saved, detail = bool(layer.Save()), ""
         except RuntimeError as exc:        # pxr.Tf.ErrorException: USD's own writer failed
