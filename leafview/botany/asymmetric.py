@@ -22,7 +22,7 @@ from leafview.botany.landmarks import LandmarkLeaf, outline_sides
 from leafview.botany.outline_fit import DEFAULT_TARGET, fit_outline
 from leafview.core.params import LeafParams
 
-__all__ = ["ShaderLeaves", "shader_leaves", "RIGHT_HALF", "LEFT_HALF"]
+__all__ = ["ShaderLeaves", "shader_leaves", "with_half", "RIGHT_HALF", "LEFT_HALF"]
 
 RIGHT_HALF = -1   # x > 0: the u < 0 half of the model
 LEFT_HALF = 1     # x < 0: the u >= 0 half
@@ -51,7 +51,8 @@ class ShaderLeaves:
         return len(self.parts) == 2
 
 
-def _with_half(params: LeafParams, half: int, name: str) -> LeafParams:
+def with_half(params: LeafParams, half: int, name: str) -> LeafParams:
+    """``params`` drawing only one half (``RIGHT_HALF`` or ``LEFT_HALF``), renamed ``name``."""
     return params.replace(shape=replace(params.shape, half=half), name=name)
 
 
@@ -77,7 +78,7 @@ def shader_leaves(leaf: LandmarkLeaf, *, n: int = 256, target: float = DEFAULT_T
     mirror = np.array([-1.0, 1.0])
     fr = fit_outline(right=right, target=target, polish=polish)
     fl = fit_outline(right=left * mirror, target=target, polish=polish)
-    parts = (_with_half(fr.params, RIGHT_HALF, f"{name} (right)" if name else "right"),
-             _with_half(fl.params, LEFT_HALF, f"{name} (left)" if name else "left"))
+    parts = (with_half(fr.params, RIGHT_HALF, f"{name} (right)" if name else "right"),
+             with_half(fl.params, LEFT_HALF, f"{name} (left)" if name else "left"))
     errors = (float(fr.error), float(fl.error))
     return ShaderLeaves(parts, max(errors), errors)

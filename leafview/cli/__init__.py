@@ -44,7 +44,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "scene": ("leafview.cli.scene", "render, save, export or view a scene of many leaves"),
     "shapes": ("leafview.cli.shapes", "list or render the botanical shape catalogue, or a multilobed leaf"),
     "dataset": ("leafview.cli.dataset", "render a synthetic dataset with exact labels (COCO, depth, normals, uv)"),
-    "fit": ("leafview.cli.fit", "fit one leaf's shape and placement to a point cloud (PLY, XYZ/CSV, .npy)"),
+    "fit": ("leafview.cli.fit", "fit one leaf to a point cloud (PLY, XYZ/CSV, .npy) or to photos (PNG, JPEG, TIFF, or a folder of them)"),
     "capture": ("leafview.cli.capture", "segment and fit the leaves of dense foliage from RGB-D views"),
     "eval-capture": ("leafview.cli.eval_capture", "score a capture against the truth its views were rendered from"),
 }

@@ -1,4 +1,4 @@
-"""``leafview view [PRESET]``: the interactive viewer window.
+"""``leafview view [PRESET] [--photo IMAGE]``: the interactive viewer window.
 
 Bad input (an unknown preset, a malformed file, a bad ``--size`` or ``--screenshot`` name) is
 reported before any window opens, with exit code 2; no display or no OpenGL 4.5 exits 1 with
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 
+from leafview.app.photo_reference import is_photo_path, open_photo
 from leafview.app.viewer import open_state
 from leafview.app.window import ViewerWindow
 from leafview.cli.args import int_in_range, output_path, preset_file, refuse_directory, window_size
@@ -28,7 +29,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.description = ("Edit a leaf live: every parameter on a slider, control points dragged in the "
                           "viewport, undo/redo, presets. H in the window shows the keys.")
     parser.add_argument("preset", nargs="?", default="ovate", metavar="PRESET",
-                        help="a .toml/.json preset or a built-in name (default: ovate)")
+                        help="a .toml/.json preset or a built-in name (default: ovate); a photo "
+                             "(.png/.jpg/.tif) opens as --photo with the default leaf")
+    parser.add_argument("--photo", default=None, metavar="IMAGE",
+                        help="a leaf photo shown behind the leaf as a reference, placed by its detected base "
+                             "and apex (opacity, markers and Fit on the panel's Reference photo section)")
     parser.add_argument("--size", type=window_size, default=(1280, 800), metavar="WxH",
                         help="window size (default 1280x800)")
     parser.add_argument("--frames", type=_frames, default=None, metavar="N",
@@ -43,6 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Open the viewer for parsed ``args``; returns the exit code."""
+    photo = args.photo
+    if photo is None and is_photo_path(args.preset):
+        photo, args.preset = args.preset, "ovate"
     path = preset_file(args.preset)
     if args.screenshot is not None:
         if format_of(args.screenshot) not in ("png", "tif"):
@@ -50,5 +58,7 @@ def run(args: argparse.Namespace) -> int:
         refuse_directory("--screenshot", args.screenshot)
     params = LeafParams.load(path)  # ParamError → exit 2, naming the file and field
     state = open_state(params, path)
+    if photo is not None and not open_photo(state, photo):
+        raise UsageError(f"--photo: {state.error}")     # before any window opens: exit 2
     with ViewerWindow(state, args.size, dev=args.dev, samples=args.samples) as window:
         return window.run(frames=args.frames, screenshot=args.screenshot)

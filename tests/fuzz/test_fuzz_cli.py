@@ -374,7 +374,8 @@ OPTIONS = {
     "dataset": ["-o", "--count", "--leaves", "--layout", "--species", "--size", "--seed", "--elevation", "--azimuth",
                 "--distance", "--sun-elevation", "--light-intensity", "--split", "--shard-size", "--engine",
                 "--workers", "--address", "--gpus-per-worker", "-q"],
-    "fit": ["-o", "--scanlines", "--iterations", "--keep-unexplained", "-q"],
+    "fit": ["-o", "--scanlines", "--iterations", "--keep-unexplained", "-q", "--base", "--apex", "--dpi",
+            "--texture-size"],
     "capture": ["-o", "--delta-plane", "--report", "--seed", "-q"],
     "eval-capture": ["--capture", "--truth", "--json", "--seed", "-q"],
 }

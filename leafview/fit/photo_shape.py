@@ -1,0 +1,587 @@
+"""The shape of a leaf mask: one leaf or two, petiole, base, apex and a smoothed outline (used by
+:func:`leafview.fit.photo_outline.leaf_outline`; x right, y down, pixel centres at integers).
+
+* **Two touching leaves** (:func:`split_shares`). The mask's distance transform (on a copy at most
+  :data:`SPLIT_SIDE` pixels across) is cut by a watershed into one basin per peak (local maxima
+  of at least a third of the largest); two basins are one leaf when the saddle between them is
+  at least :data:`NECK_RATIO` of the lower of their peaks, i.e. when the neck between the parts
+  is at least 70 % as wide as the narrower part's widest inscribed circle. Lobes, teeth and a
+  petiole stay with the blade (wide necks, or no peak of their own); two leaves touching at a
+  point or along a short stretch part. The two largest parts must also meet at a pinch: the
+  line between them is at most :data:`NECK_LENGTH` times the smaller part's inscribed radius
+  long, and one of its ends lies at least :data:`NECK_NOTCH` of that radius inside the mask's
+  convex hull (the gap between two leaves). The teeth of one long serrated leaf can pull the
+  distance transform's saddle down, but the line across such a leaf is its whole width. Limits: leaves overlapping widely, or touching
+  along most of their length, look like one broad leaf; a leaf with a waist narrower than 70 % of
+  its narrower end (a fiddle-shaped leaf) looks like two.
+* **Petiole.** The working mask is opened with a disc of :data:`PETIOLE_RADIUS` times its
+  largest inscribed radius (through two distance transforms); what lies outside the opened blade
+  at full resolution and touches it is a candidate: teeth, the apex tip, a narrow base and the
+  petiole. A candidate's centre line is the longest path through its skeleton; it is the
+  petiole when it is long (:data:`PETIOLE_MIN_LENGTH` of the leaf's extent and eight times its
+  half-width, at least), not a hair (half-width :data:`PETIOLE_MIN_RADIUS` px at least) and of
+  even width (its free third at least :data:`PETIOLE_EVENNESS` as wide as its middle: an apex tip
+  tapers to nothing); the longest such candidate wins.
+* **Base with a petiole.** Walking the petiole's centre line from its free end (cut where it
+  leaves the even petiole), then straight on into the blade, the mask's chord across the walk is
+  measured; the blade starts where the half-chord first exceeds twice the petiole's half-width.
+  The growth of the chord just past that point is extrapolated back (by
+  :data:`BASE_EXTRAPOLATION` of the way to zero width), which finds the tip of a wedge-shaped
+  (cuneate) base hidden in the petiole's width; a rounded or cordate base widens at once and
+  stays put.
+* **Base without a petiole.** The blade's principal axis (through its centroid) meets the
+  outline at two ends. The base end is, in order: the end opposite a given apex; the end with a
+  notch (a crossing more than :data:`NOTCH_DEPTH` of the length inside the outline's convex hull:
+  a cordate base); the end the secondary veins open away from (:func:`_vein_sense`, when clear);
+  the blunter end (wider by 15 % at a tenth of the length from it: apices are usually acute);
+  else the end nearer the widest part (most leaves are widest below the middle), with a warning.
+  The base itself is the notch's sinus; else the outline point farthest from the apex, unless that
+  lies more than :data:`SHOULDER` of the width off the axis (a shoulder of a truncate base), where
+  the axis' crossing is used. A nearly round blade (principal axes within 15 %) gets a warning:
+  its axis, so its ends, are a guess.
+* **Apex.** The outline point farthest from the base within 45° of the axis pointing away from it.
+* **Outline** (:func:`fit_closed_bspline`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import ConvexHull, cKDTree
+from skimage.measure import approximate_polygon, find_contours
+from skimage.morphology import convex_hull_image, skeletonize
+from skimage.segmentation import watershed
+
+__all__ = ["Shape", "leaf_shape", "split_shares", "fit_closed_bspline", "eval_closed_bspline"]
+
+SPLIT_SIDE = 200              # px: the two-leaves test runs on a mask at most this wide
+NECK_RATIO = 0.7              # saddle / lower peak of the distance transform at which two parts join
+NECK_NOTCH = 0.75             # depth in the convex hull of the neck's ends / the smaller part's peak, at least
+NECK_LENGTH = 1.8             # pixels along the neck / the smaller part's peak, at most
+PETIOLE_RADIUS = 0.25         # opening radius / largest inscribed radius of the mask
+PETIOLE_MIN_LENGTH = 0.04     # petiole length / extent of the leaf, at least
+PETIOLE_MIN_RADIUS = 1.0      # px: a thinner strand is an apex tip or noise
+PETIOLE_EVENNESS = 0.6        # width of the free third / width of the middle third, at least
+BASE_EXTRAPOLATION = 0.75    # of the distance back to zero width at the blade's first slope
+VEIN_SENSE = 0.03             # |vein sense| from which the veins tell the apex's end
+SHOULDER = 1 / 3              # farthest point off the axis by this much of the width: a truncate base
+ROUND_BLADE = 1.15            # principal standard deviations closer than this: a round blade
+NOTCH_DEPTH = 0.02            # of the blade's length
+OUTLINE_POINTS = 512
+OUTLINE_TOLERANCE = 0.0025    # Hausdorff distance of the spline to the traced contour / length
+OUTLINE_WARN = 0.005
+_EIGHT = np.ones((3, 3), bool)
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
+class Shape:
+    """What :func:`leaf_shape` finds: ``blade`` mask; ``outline`` (M, 2), ``base`` and ``apex``
+    (2,), ``petiole`` (K, 2) from free end to base, in (x, y) pixels; ``warnings``."""
+
+    blade: NDArray[np.bool_]
+    outline: Array
+    base: Array
+    apex: Array
+    petiole: Array
+    warnings: tuple[str, ...]
+
+
+# -- two leaves ---------------------------------------------------------------------------------------
+def split_shares(mask: NDArray[np.bool_]) -> list[float]:
+    """Shares of the mask's area (largest first) of the parts it falls into at narrow necks (see
+    the module docstring); ``[1.0]`` for one leaf."""
+    rows, cols = np.nonzero(mask)
+    crop = mask[rows.min():rows.max() + 1, cols.min():cols.max() + 1]
+    g = max(1, math.ceil(max(crop.shape) / SPLIT_SIDE))
+    if g > 1:
+        h, w = -(-crop.shape[0] // g) * g, -(-crop.shape[1] // g) * g
+        crop = np.pad(crop, ((0, h - crop.shape[0]), (0, w - crop.shape[1])))
+        crop = crop.reshape(h // g, g, w // g, g).mean(axis=(1, 3)) >= 0.5
+    crop = np.pad(crop, 1)
+    d = ndimage.distance_transform_edt(crop)
+    top = float(d.max())
+    if top < 2:
+        return [1.0]
+    peaks = (d == ndimage.maximum_filter(d, size=max(3, 2 * int(0.3 * top) + 1))) & (d >= top / 3)
+    markers, n = ndimage.label(peaks, structure=_EIGHT)
+    if n < 2:
+        return [1.0]
+    basins = watershed(-d, markers, mask=crop)
+    peak = np.asarray(ndimage.maximum(d, basins, np.arange(1, n + 1)), np.float64)
+    saddle = np.zeros((n + 1, n + 1))
+    for a, b, da, db in ((basins[:, :-1], basins[:, 1:], d[:, :-1], d[:, 1:]),
+                         (basins[:-1], basins[1:], d[:-1], d[1:])):
+        edge = (a != b) & (a > 0) & (b > 0)
+        np.maximum.at(saddle, (a[edge], b[edge]), np.minimum(da[edge], db[edge]))
+    saddle = np.maximum(saddle, saddle.T)
+    parent = list(range(n + 1))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for i, j in zip(*np.nonzero(np.triu(saddle))):
+        if saddle[i, j] >= NECK_RATIO * min(peak[i - 1], peak[j - 1]):
+            parent[root(int(i))] = root(int(j))
+    areas = np.bincount(basins.ravel(), minlength=n + 1).astype(np.float64)
+    groups: dict[int, float] = {}
+    for i in range(1, n + 1):
+        groups[root(i)] = groups.get(root(i), 0.0) + areas[i]
+    total = sum(groups.values())
+    if len(groups) > 1:
+        (a, _), (b, _) = sorted(groups.items(), key=lambda kv: -kv[1])[:2]
+        owner = np.array([0] + [root(i) for i in range(1, n + 1)])[basins]
+        part_a, part_b = owner == a, owner == b
+        neck = part_a & ndimage.binary_dilation(part_b, _EIGHT)
+        ends = neck & ndimage.binary_dilation(~crop, _EIGHT)
+        hull = ndimage.distance_transform_edt(convex_hull_image(crop))
+        depth = float(hull[ends].max()) if ends.any() else 0.0
+        peak_b = float(d[part_b].max())
+        if depth < NECK_NOTCH * peak_b or neck.sum() > NECK_LENGTH * peak_b:   # no pinch where they meet: one leaf
+            groups[a] += groups.pop(b)
+    return sorted((v / total for v in groups.values()), reverse=True)
+
+
+# -- B-spline outline ---------------------------------------------------------------------------------------
+def _basis(u: Array) -> Array:
+    """Uniform cubic B-spline weights (len(u), 4) of control points j .. j+3 in span j."""
+    u2, u3 = u * u, u * u * u
+    return np.stack([(1 - u) ** 3, 3 * u3 - 6 * u2 + 4, -3 * u3 + 3 * u2 + 3 * u + 1, u3], axis=1) / 6
+
+
+def _resample(points: Array, count: int) -> Array:
+    """``count`` points evenly spaced by arc length along the closed polygon ``points``."""
+    closed = np.vstack([points, points[:1]])
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(closed, axis=0).T))])
+    t = np.arange(count) * (s[-1] / count)
+    return np.stack([np.interp(t, s, closed[:, 0]), np.interp(t, s, closed[:, 1])], axis=1)
+
+
+def _lsq_controls(samples: Array, n: int, smooth: float = 1e-4) -> Array:
+    """Control points (n, 2) of the periodic uniform cubic B-spline closest in least squares to
+    ``samples`` (n·k, 2) taken at parameters i / (n·k). With k samples per span the normal
+    matrix is circulant, so it is solved exactly with FFTs; a small second-difference penalty on
+    the control polygon (``smooth`` × k) keeps it well posed."""
+    k = len(samples) // n
+    w = _basis(np.arange(k) / k)                         # (k, 4)
+    gram = w.T @ w
+    kernel = np.zeros(n)
+    for a in range(4):
+        for b in range(4):
+            kernel[(b - a) % n] += gram[a, b]
+    kernel[[0, 1, 2, -1, -2]] += smooth * k * np.array([6.0, -4.0, 1.0, -4.0, 1.0])
+    per_span = np.einsum("ua,jud->jad", w, samples.reshape(n, k, 2))   # (n, 4, 2)
+    rhs = np.sum([np.roll(per_span[:, a], a, axis=0) for a in range(4)], axis=0)
+    return np.real(np.fft.ifft(np.fft.fft(rhs, axis=0) / np.fft.fft(kernel)[:, None], axis=0))
+
+
+def eval_closed_bspline(controls: Array, t: Array) -> Array:
+    """Points of the periodic uniform cubic B-spline with ``controls`` (n, 2) at parameters ``t``
+    (period 1)."""
+    n = len(controls)
+    x = np.mod(t, 1.0) * n
+    j = np.minimum(np.floor(x).astype(np.int64), n - 1)
+    w = _basis(x - j)
+    return np.asarray(np.einsum("ka,kad->kd", w, controls[(j[:, None] + np.arange(4)) % n]), np.float64)
+
+
+def fit_closed_bspline(contour: Array, tolerance: float, spacing: float = 0.5) -> tuple[Array, float]:
+    """A smooth closed curve through a traced contour (N, 2): ``(controls, hausdorff)``.
+
+    This is the inverse subdivision of Mündermann et al. (2003, sec. 3.1) done in one step: they
+    coarsen the traced polygon by repeatedly undoing a B-spline subdivision step, which leaves a
+    control polygon whose B-spline approximates the contour. Here the contour (one vertex per
+    pixel edge it crosses) is simplified to samples evenly spaced by arc length, at most
+    ``spacing`` apart, and the periodic uniform cubic B-spline with n control points that is closest to them in
+    least squares is solved for directly (:func:`_lsq_controls`), for n = 64, 128, ... until the
+    symmetric Hausdorff distance to the samples is within ``tolerance`` (or n reaches 1024, or a
+    span would be shorter than six samples)."""
+    simple = contour
+    perimeter = float(np.hypot(*np.diff(np.vstack([simple, simple[:1]]), axis=0).T).sum())
+    n, best = 64, None
+    while True:
+        k = max(4, math.ceil(perimeter / (n * spacing)))
+        dense = _resample(simple, n * k)
+        controls = _lsq_controls(dense, n)
+        curve = eval_closed_bspline(controls, np.arange(n * k) / (n * k))
+        dist = max(float(cKDTree(curve).query(dense)[0].max()), float(cKDTree(dense).query(curve)[0].max()))
+        if best is None or dist < best[1]:
+            best = (controls, dist)
+        if dist <= tolerance or n >= 1024 or 12 * n * spacing > perimeter:
+            return best
+        n *= 2
+
+
+def _contour(blade: NDArray[np.bool_]) -> Array:
+    """The blade's outer boundary (N, 2) in (x, y), traced by marching squares at 0.5 on the
+    filled mask smoothed by a Gaussian of 0.7 px."""
+    rows, cols = np.nonzero(blade)
+    y0, x0 = int(rows.min()) - 3, int(cols.min()) - 3
+    crop = np.pad(blade, 3)[y0 + 3:int(rows.max()) + 7, x0 + 3:int(cols.max()) + 7]
+    smooth = ndimage.gaussian_filter(ndimage.binary_fill_holes(crop).astype(np.float32), 0.7)
+    contours = find_contours(smooth, 0.5)
+    c = max(contours, key=len)
+    return np.stack([c[:, 1] + x0, c[:, 0] + y0], axis=1)[:-1]
+
+
+# -- petiole ----------------------------------------------------------------------------------------------
+def _skeleton_path(piece: NDArray[np.bool_]) -> Array:
+    """The longest path (K, 2) in (row, col) through the skeleton of ``piece``."""
+    sk = skeletonize(piece)
+    rc = np.argwhere(sk)
+    if len(rc) < 2:
+        return rc.astype(np.float64)
+    index = -np.ones(sk.shape, np.int64)
+    index[rc[:, 0], rc[:, 1]] = np.arange(len(rc))
+    src, dst, wt = [], [], []
+    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        r2, c2 = rc[:, 0] + dr, rc[:, 1] + dc
+        ok = (r2 < sk.shape[0]) & (c2 >= 0) & (c2 < sk.shape[1])
+        nb = np.full(len(rc), -1)
+        nb[ok] = index[r2[ok], c2[ok]]
+        has = nb >= 0
+        src.append(np.nonzero(has)[0])
+        dst.append(nb[has])
+        wt.append(np.full(int(has.sum()), math.hypot(dr, dc)))
+    graph = coo_matrix((np.concatenate(wt), (np.concatenate(src), np.concatenate(dst))), shape=(len(rc),) * 2)
+    d0 = dijkstra(graph, directed=False, indices=0)
+    a = int(np.argmax(np.where(np.isfinite(d0), d0, -1)))
+    da, pred = dijkstra(graph, directed=False, indices=a, return_predecessors=True)
+    b = int(np.argmax(np.where(np.isfinite(da), da, -1)))
+    path = [b]
+    while path[-1] != a:
+        path.append(int(pred[path[-1]]))
+    return rc[path].astype(np.float64)
+
+
+def _half_chords(mask: NDArray[np.bool_], points: Array, normals: Array, reach: float) -> Array:
+    """Half the length of the mask's chord through each point (x, y) along its normal."""
+    ts = np.arange(-reach, reach + 0.25, 0.5)
+    c = len(ts) // 2
+    xy = points[:, None, :] + ts[None, :, None] * normals[:, None, :]
+    inside = ndimage.map_coordinates(mask, [xy[..., 1], xy[..., 0]], order=0, mode="constant", cval=0).astype(bool)
+    right = np.where(inside[:, c:].all(axis=1), len(ts) - c, np.argmin(inside[:, c:], axis=1))
+    left = np.where(inside[:, c::-1].all(axis=1), c + 1, np.argmin(inside[:, c::-1], axis=1))
+    return np.where(inside[:, c], (right + left - 1) * 0.25, 0.0)
+
+
+def _walk(path: Array, axis: Array, extra: float) -> tuple[Array, Array]:
+    """Points at 1 px spacing along ``path`` (K, 2) then straight on along ``axis`` for ``extra``
+    px, with their unit tangents."""
+    seg = np.hypot(*np.diff(path, axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(seg)])
+    t = np.arange(0.0, s[-1], 1.0)
+    pts = np.stack([np.interp(t, s, path[:, 0]), np.interp(t, s, path[:, 1])], axis=1)
+    pts = np.vstack([pts, path[-1] + np.arange(0.0, extra, 1.0)[:, None] * axis])
+    tan = np.gradient(ndimage.uniform_filter1d(pts, 7, axis=0, mode="nearest"), axis=0)
+    tan /= np.maximum(np.hypot(*tan.T), 1e-9)[:, None]
+    return pts, tan
+
+
+@dataclass(frozen=True)
+class _Petiole:
+    path: Array                 # (K, 2) x, y along the skeleton, from the free end to the blade
+    radii: Array                # (K,) the mask's distance transform along it
+    pixels: NDArray[np.bool_]   # the piece the opening removed (petiole and whatever blade tip came with it)
+    radius: float               # median half-width of its middle third
+    length: float
+
+
+def _opened(mask: NDArray[np.bool_], edt: Array) -> NDArray[np.bool_]:
+    """The largest component of ``mask`` opened by a disc of :data:`PETIOLE_RADIUS` times its
+    largest inscribed radius (an erosion and a dilation, each a threshold of a distance transform)."""
+    r = max(1.5, PETIOLE_RADIUS * float(edt.max()))
+    opened = ndimage.distance_transform_edt(edt <= r) <= r
+    lab, n = ndimage.label(opened, structure=_EIGHT)
+    if n == 0:
+        return opened
+    return np.asarray(lab == int(np.argmax(np.bincount(lab.ravel())[1:]) + 1), bool)
+
+
+def _find_petiole(fine: NDArray[np.bool_], core: NDArray[np.bool_], extent: float) -> _Petiole | None:
+    """The petiole among the pieces of ``fine`` outside ``core`` (the opened blade, at the same
+    resolution), or None (module docstring). Each piece is measured in a window of its own."""
+    thin, _ = ndimage.label(fine & ~core, structure=_EIGHT)
+    best: _Petiole | None = None
+    for i, sl in enumerate(ndimage.find_objects(thin), start=1):
+        if sl is None or math.hypot(sl[0].stop - sl[0].start, sl[1].stop - sl[1].start) < PETIOLE_MIN_LENGTH * extent:
+            continue
+        m = 4
+        r0, c0 = max(sl[0].start - m, 0), max(sl[1].start - m, 0)
+        win = np.s_[r0:sl[0].stop + m, c0:sl[1].stop + m]
+        piece = thin[win] == i
+        touch = np.argwhere(piece & ndimage.binary_dilation(core[win], _EIGHT))
+        if len(touch) == 0:
+            continue
+        rc = _skeleton_path(piece)
+        if len(rc) < 6:
+            continue
+        if np.hypot(*(rc[0] - touch.mean(0))) < np.hypot(*(rc[-1] - touch.mean(0))):
+            rc = rc[::-1]                                          # free end first
+        edt = ndimage.distance_transform_edt(np.pad(fine[win], 1, mode="edge"))[1:-1, 1:-1]
+        radii = edt[rc[:, 0].astype(int), rc[:, 1].astype(int)]
+        third = len(rc) // 3
+        rho = float(np.median(radii[third:2 * third]))
+        length = float(np.hypot(*np.diff(rc, axis=0).T).sum()) + rho
+        if (rho < PETIOLE_MIN_RADIUS or length < PETIOLE_MIN_LENGTH * extent or length < 8 * rho
+                or float(np.median(radii[:third])) < PETIOLE_EVENNESS * rho):
+            continue
+        if best is None or length > best.length:
+            pixels = np.zeros_like(fine)
+            pixels[win] = piece
+            best = _Petiole((rc + (r0, c0))[:, ::-1].copy(), radii, pixels, rho, length)
+    return best
+
+
+def _extend_free_end(mask: NDArray[np.bool_], path: Array) -> Array:
+    """``path`` with its first point moved on, in the direction it ends in, to the mask's edge."""
+    d = path[0] - path[min(5, len(path) - 1)]
+    d /= max(float(np.hypot(*d)), 1e-9)
+    steps = path[0] + np.arange(0.5, 4 * len(path), 0.5)[:, None] * d
+    ij = np.rint(steps[:, ::-1]).astype(int)
+    ok = (ij >= 0).all(1) & (ij[:, 0] < mask.shape[0]) & (ij[:, 1] < mask.shape[1])
+    inside = ok.copy()
+    inside[ok] = mask[ij[ok, 0], ij[ok, 1]]
+    run = int(np.argmin(inside)) if not inside.all() else len(inside)
+    return path if run == 0 else np.vstack([steps[run - 1], path])
+
+
+def _petiole_base(mask: NDArray[np.bool_], pet: _Petiole, extent: float,
+                  base: Array | None) -> tuple[Array, Array, Array]:
+    """(base, petiole polyline from its free end to the base, unit direction into the blade)."""
+    rho = max(pet.radius, 0.75)
+    odd = np.nonzero((pet.radii > 1.5 * rho + 0.5) | (pet.radii < min(0.75 * rho, rho - 1)))[0]
+    odd = odd[odd >= len(pet.radii) // 3]          # where the centre line leaves the even petiole
+    path = _extend_free_end(mask, pet.path[:int(odd[0])] if len(odd) else pet.path)
+    back = path[-min(len(path), int(3 * rho) + 4)]
+    direction = path[-1] - back
+    direction /= max(float(np.hypot(*direction)), 1e-9)
+    pts, tan = _walk(path, direction, 0.4 * extent)
+    if base is None:
+        half = _half_chords(mask, pts, np.stack([-tan[:, 1], tan[:, 0]], axis=1), 8 * rho + 4)
+        start = int(np.hypot(*np.diff(path, axis=0).T).sum()) // 3     # not at the free end
+        above = np.nonzero(half[start:] > 2 * rho + 0.5)[0]
+        i = start + int(above[0]) if len(above) else len(path) - 1
+        run = half[i:i + int(3 * rho) + 3]
+        slope = float(np.polyfit(np.arange(len(run)), run, 1)[0]) if len(run) >= 3 else 0.0
+        if i > 0:                                  # a jump (rounded or cordate base) is not extrapolated
+            slope = max(slope, half[i] - half[i - 1], (half[min(i + 1, len(half) - 1)] - half[i - 1]) / 2)
+        back_px = min(BASE_EXTRAPOLATION * half[i] / slope, 4 * rho + 2) if slope > 0 else 0.0
+        k = max(0, i - int(round(back_px)))
+    else:
+        k = int(np.argmin(np.hypot(*(pts - base).T)))
+    found = pts[k] if base is None else base
+    line = np.vstack([approximate_polygon(pts[:k + 1], tolerance=0.3), found[None]])
+    return found, line, tan[k]
+
+
+# -- base and apex without a petiole ---------------------------------------------------------------------------
+def _axis(blade: NDArray[np.bool_]) -> tuple[Array, Array]:
+    """(centroid, unit principal axis) of the mask's pixels, in (x, y)."""
+    c, vec, _ = _moments(blade)
+    return c, vec
+
+
+def _moments(blade: NDArray[np.bool_]) -> tuple[Array, Array, float]:
+    """(centroid, unit principal axis, ratio of the principal standard deviations ≥ 1)."""
+    yx = np.argwhere(blade).astype(np.float64)
+    c = yx.mean(axis=0)
+    values, vectors = np.linalg.eigh(np.cov((yx - c).T))
+    return c[::-1].copy(), vectors[:, -1][::-1].copy(), float(np.sqrt(values[-1] / max(values[0], 1e-12)))
+
+
+def _frame(contour: Array, centre: Array, axis: Array) -> tuple[Array, Array]:
+    """Projections of the contour on the axis and across it."""
+    rel = contour - centre
+    return rel @ axis, rel @ np.array([-axis[1], axis[0]])
+
+
+def _width_at(s: Array, lat: Array, at: float, step: float) -> float:
+    """The contour's extent across the axis within ``step`` of projection ``at``."""
+    band = np.abs(s - at) <= step
+    return float(lat[band].max() - lat[band].min()) if band.sum() >= 2 else 0.0
+
+
+def _end_point(contour: Array, s: Array, lat: Array, low: bool, hull: Array) -> tuple[Array, float]:
+    """One end of the blade along its axis: the point where the axis line crosses the contour
+    there, and how deep that point lies inside the contour's convex hull (``hull``: its facet
+    equations). A deep one is a notch, and the point becomes the deepest contour point near it (a
+    cordate base's sinus)."""
+    nxt = np.roll(np.arange(len(contour)), -1)
+    cross = np.nonzero(np.sign(lat) != np.sign(lat[nxt]))[0]
+    if len(cross) == 0:
+        cross = np.array([int(np.argmin(np.abs(lat)))])
+    w = lat[cross] / np.where(lat[cross] == lat[nxt[cross]], 1.0, lat[cross] - lat[nxt[cross]])
+    sc = s[cross] + w * (s[nxt[cross]] - s[cross])
+    j = int(np.argmin(sc)) if low else int(np.argmax(sc))
+    point = contour[cross[j]] + w[j] * (contour[nxt[cross[j]]] - contour[cross[j]])
+    depth = float(-np.max(hull[:, :2] @ point + hull[:, 2]))
+    extent = float(s.max() - s.min())
+    if depth > NOTCH_DEPTH * extent:
+        inside = -np.max(contour @ hull[:, :2].T + hull[:, 2], axis=1)
+        near = np.hypot(*(contour - point).T) <= max(2 * depth, 0.05 * extent)
+        k = int(np.argmax(np.where(near, inside, -np.inf)))
+        point, depth = contour[k], float(inside[k])
+    return np.asarray(point, np.float64).copy(), depth
+
+
+def _vein_sense(grey: NDArray[np.float32] | None, blade: NDArray[np.bool_], centre: Array, axis: Array) -> float:
+    """Which way the secondary veins point along the axis, from -1 (towards -axis) to 1.
+
+    Pinnate secondary veins leave the midrib at an acute angle opening towards the apex, a
+    chevron. Across a vein the brightness gradient (g_s, g_l) in the axis frame (along, across)
+    is perpendicular to the vein, so a vein at angle φ to the axis has g_s·g_l ∝ -sin φ cos φ,
+    whose sign flips between the two sides of the midrib. The gradient products summed over each
+    side of the axis (the blade's edge excluded), differenced and normalised by the gradient
+    energy, give the sense; ~0 when no veins show."""
+    if grey is None:
+        return 0.0
+    inner = ndimage.binary_erosion(blade, _EIGHT, iterations=3)
+    if inner.sum() < 50:
+        return 0.0
+    gy, gx = ndimage.sobel(grey, axis=0), ndimage.sobel(grey, axis=1)
+    yx = np.argwhere(inner)
+    gxs, gys = gx[inner], gy[inner]
+    g_s, g_l = gxs * axis[0] + gys * axis[1], -gxs * axis[1] + gys * axis[0]
+    side = np.sign((yx[:, ::-1] - centre) @ np.array([-axis[1], axis[0]]))
+    energy = float(np.sum(g_s * g_s + g_l * g_l))
+    return float(-np.sum(side * g_s * g_l) / energy) if energy > 0 else 0.0
+
+
+def _base_without_petiole(contour: Array, centre: Array, axis: Array, apex: Array | None, step: float,
+                          veins: float) -> tuple[Array, str | None]:
+    """The base of a blade with no petiole (module docstring) and a warning when it is a guess.
+    ``veins`` is :func:`_vein_sense` (positive: the apex lies towards +axis)."""
+    s, lat = _frame(contour, centre, axis)
+    extent = float(s.max() - s.min())
+    hull = ConvexHull(contour).equations
+    (lo, dlo), (hi, dhi) = _end_point(contour, s, lat, True, hull), _end_point(contour, s, lat, False, hull)
+    ends, notch = [lo, hi], [dlo, dhi]
+    near = [_width_at(s, lat, float(s.min()) + 0.1 * extent, step), _width_at(s, lat, float(s.max()) - 0.1 * extent, step)]
+    note = None
+    if apex is not None:
+        b = int(np.argmax([np.hypot(*(e - apex)) for e in ends]))
+    elif max(notch) > NOTCH_DEPTH * extent and min(notch) < 0.5 * NOTCH_DEPTH * extent:
+        b = int(np.argmax(notch))
+    elif abs(veins) >= VEIN_SENSE:
+        b = 0 if veins > 0 else 1
+    elif max(near) > 1.15 * max(min(near), 1e-9):
+        b = int(np.argmax(near))
+    else:
+        ss = np.linspace(float(s.min()), float(s.max()), 41)[1:-1]
+        widest = float(ss[int(np.argmax([_width_at(s, lat, x, step) for x in ss]))])
+        b = 0 if widest - s.min() < s.max() - widest else 1
+        note = ("the base was told from the apex by the widest part of the blade only (the two ends are alike): "
+                "check it, or give --base and --apex")
+    if notch[b] > NOTCH_DEPTH * extent:
+        return ends[b], note                          # a cordate base's sinus
+    towards = axis if b == 1 else -axis              # from the centre to the base end
+    tip = apex if apex is not None else _apex(contour, ends[b], -towards)
+    far = _apex(contour, tip, towards, 60.0)         # a pointed or rounded base: farthest from the apex
+    widest = max(_width_at(s, lat, x, step) for x in np.linspace(s.min(), s.max(), 21)[1:-1])
+    if abs(float((far - centre) @ np.array([-axis[1], axis[0]]))) > SHOULDER * widest:
+        return ends[b], note                          # that is a shoulder of a truncate base: its middle
+    return far, note
+
+
+def _apex(contour: Array, base: Array, axis: Array, cone_deg: float = 45.0) -> Array:
+    """The contour point farthest from ``base`` within ``cone_deg`` of ``axis``."""
+    rel = contour - base
+    dist = np.hypot(*rel.T)
+    cone = rel @ axis >= math.cos(math.radians(cone_deg)) * dist
+    return contour[int(np.argmax(np.where(cone, dist, -1.0)))].copy()
+
+
+# -- the whole -------------------------------------------------------------------------------------------------
+def _block_any(mask: NDArray[np.bool_], f: int, shape: tuple[int, int]) -> NDArray[np.bool_]:
+    """Which ``f`` × ``f`` blocks of ``mask`` hold a true pixel, as an array of ``shape``."""
+    h, w = shape
+    padded = np.zeros((h * f, w * f), bool)
+    padded[:mask.shape[0], :mask.shape[1]] = mask[:h * f, :w * f]
+    return np.asarray(padded.reshape(h, f, w, f).any(axis=(1, 3)), bool)
+
+
+def _up(mask: NDArray[np.bool_], f: int, shape: tuple[int, int]) -> NDArray[np.bool_]:
+    if f == 1:
+        return mask
+    return np.asarray(np.repeat(np.repeat(mask, f, axis=0), f, axis=1)[:shape[0], :shape[1]], bool)
+
+
+def leaf_shape(mask: NDArray[np.bool_], *, fine: NDArray[np.bool_] | None = None, f: int = 1,
+               grey: NDArray[np.float32] | None = None, base: Array | None = None,
+               apex: Array | None = None) -> Shape:
+    """Blade, outline, base, apex and petiole of the leaf ``mask`` (module docstring).
+
+    ``mask`` is the leaf at working resolution; ``fine`` the same leaf ``f`` times finer (pixel
+    (i, j) of ``mask`` covers rows i·f .. i·f + f - 1 and columns j·f .. j·f + f - 1 of ``fine``),
+    or None when they are one; ``grey`` the photo's brightness aligned with ``mask`` (for the
+    veins), if known. Blade-scale work (distance transform, opening, outline) is done on
+    ``mask``, the thin petiole on ``fine``; everything returned is in ``fine``'s pixels. ``base``
+    and ``apex`` ((x, y) in ``fine``'s pixels), where given, are kept."""
+    fine = mask if fine is None else fine
+
+    def to_fine(p: Array) -> Array:
+        return np.asarray((p + 0.5) * f - 0.5, np.float64)
+
+    warnings: list[str] = []
+    edt = ndimage.distance_transform_edt(np.pad(mask, 1, mode="edge"))[1:-1, 1:-1]
+    centre, axis = _axis(mask)
+    extent = float(np.ptp((np.argwhere(mask)[:, ::-1] - centre) @ axis)) * f
+    opened = _opened(mask, edt)
+    core = _up(ndimage.binary_dilation(opened, _EIGHT) if f > 1 else opened, f, fine.shape)
+    pet = _find_petiole(fine, core, extent)
+    blade, blade_w = fine, mask
+    petiole = np.zeros((0, 2))
+    if pet is not None:
+        base, petiole, direction = _petiole_base(fine, pet, extent, base)
+        yx = np.argwhere(pet.pixels)
+        behind = (yx[:, ::-1] - base) @ direction < 0
+        cut = np.zeros_like(fine)
+        cut[yx[behind, 0], yx[behind, 1]] = True
+        blade = fine & ~cut
+        lab, n = ndimage.label(mask & ~(_block_any(cut, f, mask.shape) if f > 1 else cut), structure=_EIGHT)
+        if n:
+            blade_w = lab == int(np.argmax(np.bincount(lab.ravel())[1:]) + 1)
+    contour = to_fine(_contour(blade_w))
+    centre_w, axis, elongation = _moments(blade_w)
+    centre = to_fine(centre_w)
+    if base is None and apex is None and elongation < ROUND_BLADE and pet is None:
+        warnings.append("the blade is nearly round, so which way its axis runs is a guess: check the base and apex, "
+                        "or give --base and --apex")
+    if base is None:
+        veins = _vein_sense(grey, blade_w, centre_w, axis)
+        base, note = _base_without_petiole(contour, centre, axis, apex, float(f), veins)
+        if note:
+            warnings.append(note)
+    away = axis if (centre - base) @ axis >= 0 else -axis
+    if apex is None:
+        apex = _apex(contour, base, away)
+    length = max(float(np.hypot(*(apex - base))), 1.0)
+    controls, hausdorff = fit_closed_bspline(contour, max(0.5 * f, OUTLINE_TOLERANCE * length), 0.5 * f)
+    if hausdorff > max(0.75 * f, OUTLINE_WARN * length):
+        warnings.append(f"the smoothed outline departs up to {hausdorff / length:.1%} of the length from the traced "
+                        f"one (a very ragged margin?)")
+    return Shape(blade=np.asarray(blade, bool), outline=_ordered_outline(controls, base),
+                 base=np.asarray(base, np.float64), apex=np.asarray(apex, np.float64), petiole=petiole,
+                 warnings=tuple(warnings))
+
+
+def _ordered_outline(controls: Array, base: Array) -> Array:
+    """:data:`OUTLINE_POINTS` points of the spline, counter-clockwise on screen (negative shoelace
+    area with y down), the first nearest ``base``."""
+    dense_t = np.arange(16 * len(controls)) / (16 * len(controls))
+    dense = eval_closed_bspline(controls, dense_t)
+    x, y = dense.T
+    area = 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+    t0 = float(dense_t[int(np.argmin(np.hypot(*(dense - base).T)))])
+    sign = 1.0 if area < 0 else -1.0
+    return eval_closed_bspline(controls, t0 + sign * np.arange(OUTLINE_POINTS) / OUTLINE_POINTS)
