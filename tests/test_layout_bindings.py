@@ -270,7 +270,7 @@ def built_programs(gl, presets, monkeypatch):
         assert scene.stems is not None
         with SceneRenderer(ctx, scene, resources=res) as s:
             s.render(scene_camera(scene, (32, 32)), (32, 32), samples=0)
-        hotreload.compile_check(ctx)   # the viewer's programs: leaf, overlay, imgui (built and released)
+        hotreload.compile_check(ctx)   # the viewer's programs: leaf, overlay, imgui, reference photo (built and released)
         monkeypatch.undo()
         yield built
     assert ctx.error == "GL_NO_ERROR"

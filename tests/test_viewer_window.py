@@ -19,6 +19,7 @@ from support.display import DisplayUnavailable, display_env, xvfb
 
 from leafview.core.params import LeafParams
 from leafview.export.images import PARAMS_ATTRIBUTE, read_image
+from leafview.fit.synthetic_photos import synthetic_photo, write_photo
 from leafview.resources import builtin_presets
 from tests.conftest import require_or_skip
 
@@ -77,14 +78,31 @@ def test_bad_input_exits_2_before_any_window(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("schema = 1\n[shape]\na1 = [0, 0.3, 0]\n")
     exe = shutil.which("leafview") or pytest.fail("the leafview console script is not installed")
+    (tmp_path / "cut.png").write_bytes(b"\x89PNG\r\n\x1a\n" + b"\0" * 40)
     for args, words in (([str(bad)], "shape.a2"), (["nope"], "no such file"),
+                        (["--photo", "cut.png"], "cut.png"), (["cut.png"], "cut.png"),
                         (["ovate", "--screenshot", "x.jpg"], ".png or .tif"),
                         (["ovate", "--frames", "0"], "at least 1")):
         result = subprocess.run([exe, "view", *args], cwd=tmp_path, capture_output=True, text=True, timeout=60,
                                 env={k: v for k, v in os.environ.items() if k != "DISPLAY"})
         assert result.returncode == 2, (args, result.stderr)
         assert words in result.stderr and "Traceback" not in result.stderr
-    assert not list(tmp_path.glob("*.png")) and not list(tmp_path.glob("*.jpg"))
+    assert [p.name for p in tmp_path.glob("*.png")] == ["cut.png"] and not list(tmp_path.glob("*.jpg"))
+
+
+def test_a_photo_opens_behind_the_leaf(gl, display, tmp_path):
+    """``leafview view PHOTO``: the default leaf over the photo, placed by the photo's base and apex."""
+    exe = shutil.which("leafview") or pytest.fail("the leafview console script is not installed")
+    photo = write_photo(synthetic_photo(3, size=(480, 360), background="pink"), tmp_path / "leaf.png")
+    out = tmp_path / "window.png"
+    result = _run([exe, "view", str(photo), "--frames", "6", "--screenshot", str(out), "--size", "1024x640"],
+                  display, tmp_path)
+    assert result.returncode == 0, result.stderr
+    rgb = read_image(out)[0][..., :3].astype(int)[:, :1024 - 400]
+    # the photo's pink paper behind the leaf, at the default opacity over the dark background
+    pink = (rgb[..., 0] > rgb[..., 1] + 10) & (rgb[..., 2] > rgb[..., 1] + 5) & (rgb.sum(axis=-1) > 300)
+    green = (rgb[..., 1] > rgb[..., 0] + 25) & (rgb[..., 1] > rgb[..., 2] + 25)
+    assert pink.mean() > 0.2 and green.mean() > 0.05
 
 
 def test_no_display_is_a_message_not_a_traceback(tmp_path):

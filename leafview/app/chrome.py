@@ -12,6 +12,7 @@ from pathlib import Path
 
 from imgui_bundle import imgui
 
+from leafview.app.photo_reference import is_photo_path, open_photo
 from leafview.app.state import ViewerState
 
 __all__ = ["FileBar", "KEYS", "draw_help", "draw_status", "draw_error_window", "ERROR_COLOR", "load_font"]
@@ -22,6 +23,7 @@ CONFIRM_POPUP = "Unsaved changes##confirm"
 #: the key table (README and help overlay)
 KEYS: tuple[tuple[str, str], ...] = (
     ("left drag", "orbit (on a white handle: move that control point)"),
+    ("left drag on an orange / blue point", "move the reference photo's base / apex (for Fit)"),
     ("middle drag / shift+left drag", "pan"),
     ("wheel", "dolly"),
     ("R", "reset the view"),
@@ -82,6 +84,11 @@ class FileBar:
         self.quit_requested = True
 
     def request_open(self, path: str | Path) -> None:
+        """Open a leaf preset (asking first about unsaved edits), or an image file (PNG, JPEG,
+        TIFF): that becomes the reference photo behind the current leaf, which is kept."""
+        if is_photo_path(path):
+            open_photo(self.state, path)
+            return
         self.request(f"open {Path(path).name}", lambda: self.state.open(path))
 
     def save(self) -> None:
@@ -139,6 +146,8 @@ class FileBar:
             imgui.set_next_item_width(-60)
             entered, self.open_path = imgui.input_text("##open-path", self.open_path,
                                                        imgui.InputTextFlags_.enter_returns_true)
+            if imgui.is_item_hovered():
+                imgui.set_tooltip("a leaf (.toml, .json), or a photo (.png, .jpg, .tif) to show behind the leaf")
             imgui.same_line()
             if (self._button("Open##open-go") or entered) and self.open_path.strip():
                 self.request_open(self.open_path.strip())

@@ -63,6 +63,7 @@ def compile_check(ctx: moderngl.Context) -> None:
         built.append(build_compute(ctx, "leaf_prepare.comp"))
         built.append(build_program(ctx, "overlay.vert", "overlay.frag"))
         built.append(build_program(ctx, "overlay_imgui.vert", "overlay_imgui.frag"))
+        built.append(build_program(ctx, "photo_reference.vert", "photo_reference.frag"))
     finally:
         for obj in built:
             obj.release()

@@ -14,6 +14,7 @@ from imgui_bundle import imgui
 
 from leafview.app.handles import drag_handle, drag_plane_normal, pick, plane_hit
 from leafview.app.orbit import project
+from leafview.app.photo_reference import marker_world, move_marker, plane_normal
 
 if TYPE_CHECKING:  # pragma: no cover
     from leafview.app.viewer import Viewer
@@ -89,9 +90,13 @@ class ViewportInput:
             self.hot = None
             if inside and overlay is not None and not io.want_capture_mouse and len(overlay.handle_world):
                 self.hot = pick(self._handles_on_screen(scene_w, h), overlay.handle_names, mx, my, PICK_RADIUS)
+            if self.hot is None and inside and overlay is not None and not io.want_capture_mouse:
+                self.hot = self._pick_marker(mx, my, scene_w, h)
         if self.drag is None and inside and not io.want_capture_mouse and not v.files.asking:
             if imgui.is_mouse_clicked(imgui.MouseButton_.left):
-                if self.hot is not None:
+                if self.hot is not None and self.hot.startswith("photo:"):
+                    self.drag = {"kind": "marker", "button": imgui.MouseButton_.left, "handle": self.hot}
+                elif self.hot is not None:
                     self._start_handle(self.hot, scene_w, h)
                 else:
                     self.drag = {"kind": "pan" if io.key_shift else "orbit", "button": imgui.MouseButton_.left}
@@ -114,6 +119,30 @@ class ViewportInput:
             v.camera.pan(dx, dy, h)
         elif kind == "handle" and (dx or dy):
             self._move_handle(mx, my, scene_w, h)
+        elif kind == "marker" and (dx or dy):
+            self._move_marker(mx, my, scene_w, h)
+
+    def _pick_marker(self, mx: float, my: float, scene_w: float, h: int) -> str | None:
+        """The reference photo's base or apex marker under the mouse, if shown."""
+        state = self.viewer.state
+        where = marker_world(state.reference, state.params) if state.reference.visible else {}
+        if not where:
+            return None
+        cam = self.viewer.camera.camera(int(round(scene_w)), h)
+        screen = project(cam, np.array(list(where.values())), int(round(scene_w)), h)
+        return pick(screen, where, mx, my, PICK_RADIUS)
+
+    def _move_marker(self, mx: float, my: float, scene_w: float, h: int) -> None:
+        """Drag a photo marker within the photo's plane."""
+        v, d = self.viewer, self.drag
+        assert d is not None
+        where = marker_world(v.state.reference, v.state.params)
+        if d["handle"] not in where:
+            return
+        origin, direction = v.camera.ray(mx, my, int(round(scene_w)), h)
+        hit = plane_hit(origin, direction, where[d["handle"]], plane_normal(v.state.params))
+        if hit is not None:
+            move_marker(v.state, d["handle"], hit)
 
     def _start_handle(self, name: str, scene_w: float, h: int) -> None:
         v = self.viewer

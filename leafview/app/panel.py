@@ -20,6 +20,7 @@ from typing import Any, Literal
 import numpy as np
 from imgui_bundle import imgui
 
+from leafview.app.photo_reference import close_photo, fit_reference, report_line
 from leafview.app.state import ViewerState
 from leafview.core.edits import curve_axis, curve_longitudinal, scale_width, skew_axis
 from leafview.core.params import FieldSpec, LeafParams
@@ -229,6 +230,50 @@ class ParamPanel:
                                   if self.unicode_labels else f"{curve} curvature (z{curve.lower()})",
                                   sum(zs) / 3, _longitudinal_edit(curve))
         imgui.text_disabled("drag the white handles in the viewport:\na1, a2 skew the axis; s1..sN shape the outline")
+
+    # -- the reference photo (Garg & Leow 2011, Fig. 1) ---------------------------------------
+    def draw_reference(self) -> None:
+        """Opacity, show/hide, the base and apex points handed to the fit, Fit and its report.
+        Drawn only while a photo is open (Open… accepts PNG, JPEG and TIFF)."""
+        ref = self.state.reference
+        if ref.path is None:
+            return
+        imgui.set_next_item_open(True, imgui.Cond_.always if self.expand_all else imgui.Cond_.first_use_ever)
+        if not imgui.collapsing_header("Reference photo##group-reference"):
+            return
+        w, h = ref.size
+        dpi = f", {ref.dpi:g} dpi" if ref.dpi else ""
+        imgui.text_disabled(f"{ref.path.name}: {w}×{h} px{dpi}{', fitted' if ref.fitted else ''}")
+        _, ref.visible = imgui.checkbox("show##reference", ref.visible)
+        self._record("reference.visible")
+        changed, opacity = imgui.slider_float("opacity##reference", ref.opacity, 0.0, 1.0, "%.2f")
+        if changed:
+            ref.opacity = float(min(max(opacity, 0.0), 1.0))
+        self._record("reference.opacity")
+        for key, label in (("base_px", "base (px)"), ("apex_px", "apex (px)")):
+            point = getattr(ref, key)
+            if point is None:
+                continue
+            changed, new = imgui.drag_float2(f"{label}##reference", list(point), 0.5, 0.0, float(max(w, h)), "%.1f")
+            if changed:
+                setattr(ref, key, (float(min(max(new[0], 0.0), w - 1.0)), float(min(max(new[1], 0.0), h - 1.0))))
+            self._record(f"reference.{key}")
+        if imgui.button("Fit##reference"):
+            fit_reference(self.state)
+        self._record("reference.fit")
+        if imgui.is_item_hovered():
+            imgui.set_tooltip("fit the leaf to the photo from these base and apex points (undoable)")
+        imgui.same_line()
+        if imgui.button("Close photo##reference"):
+            close_photo(self.state)
+        self._record("reference.close")
+        if ref.report:
+            imgui.text(report_line(ref.report))
+        for line in ref.warnings:
+            imgui.push_text_wrap_pos(0.0)
+            imgui.text_disabled(line)
+            imgui.pop_text_wrap_pos()
+        imgui.text_disabled("drag the orange (base) and blue (apex) points\nand the white handles over the photo")
 
     # -- view settings (not saved with the leaf) ------------------------------------------------
     def draw_view(self) -> None:

@@ -11,14 +11,17 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, fields, is_dataclass
+from dataclasses import dataclass, field, fields, is_dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
 
 from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.params import FieldSpec, LeafParams, ParamError, field_specs, parse_params
 
-__all__ = ["ViewerState", "ViewSettings", "get_field", "with_field", "HISTORY_LIMIT"]
+__all__ = ["ViewerState", "ViewSettings", "ReferencePhoto", "get_field", "with_field", "HISTORY_LIMIT"]
 
 HISTORY_LIMIT = 500
 
@@ -39,6 +42,34 @@ class ViewSettings:
         """Unit vector towards the key light (world space, z up)."""
         az, el = math.radians(self.light_azimuth), math.radians(self.light_elevation)
         return (math.sin(az) * math.cos(el), -math.cos(az) * math.cos(el), math.sin(el))
+
+
+@dataclass
+class ReferencePhoto:
+    """The photo shown behind the leaf (``leafview.app.photo_reference``): not part of the leaf,
+    not saved, not undone. Pixel coordinates are the full photo's (x right, y down).
+
+    ``image`` is the display copy (RGBA uint8, reduced by ``factor``); ``size`` the photo's
+    (width, height); ``base_px`` / ``apex_px`` the landmarks handed to the fit; ``leaf_from_pixel``
+    the 3 × 3 placement in leaf space; ``report`` the last fit's measures
+    (:func:`leafview.fit.photo.fit_image`); ``revision`` changes whenever ``image`` does; ``fits``
+    counts the fits made (the viewer frames the leaf after each)."""
+
+    path: Path | None = None
+    image: NDArray[np.uint8] | None = None
+    factor: int = 1
+    size: tuple[int, int] = (0, 0)
+    dpi: float | None = None
+    opacity: float = 0.6
+    visible: bool = True
+    base_px: tuple[float, float] | None = None
+    apex_px: tuple[float, float] | None = None
+    leaf_from_pixel: NDArray[np.float64] | None = None
+    fitted: bool = False
+    report: dict[str, Any] = field(default_factory=dict)
+    warnings: tuple[str, ...] = field(default_factory=tuple)
+    revision: int = 0
+    fits: int = 0
 
 
 def _plain(value: Any) -> Any:
@@ -99,6 +130,8 @@ class ViewerState:
         The last status message (saved, opened, screenshot written, ...).
     view : ViewSettings
         Viewport toggles.
+    reference : ReferencePhoto
+        The photo shown behind the leaf, if any.
     """
 
     def __init__(self, params: LeafParams | None = None, path: str | Path | None = None, *,
@@ -113,6 +146,7 @@ class ViewerState:
         self.error: str | None = None
         self.message = ""
         self.view = ViewSettings()
+        self.reference = ReferencePhoto()
         self._undo: list[LeafParams] = []
         self._redo: list[LeafParams] = []
         self._gesture: str | None = None

@@ -33,6 +33,7 @@ from leafview.app.morph_panel import MorphPanel
 from leafview.app.orbit import OrbitCamera
 from leafview.app.overlay import Overlay
 from leafview.app.panel import ParamPanel
+from leafview.app.photo_reference import PhotoLayer
 from leafview.app.state import ViewerState
 from leafview.core.params import LeafParams
 from leafview.deform.surface import tessellate
@@ -102,10 +103,12 @@ class Viewer:
         self.gui: ImguiRenderer | None = None
         self.renderer: LeafRenderer | None = None
         self.overlay: Overlay | None = None
+        self.photo: PhotoLayer | None = None     # the reference photo behind the leaf
         try:
             self.gui = ImguiRenderer(ctx)
             self.renderer = LeafRenderer(ctx)
             self.overlay = Overlay(ctx)
+            self.photo = PhotoLayer(ctx)
         except BaseException:
             self.release()
             raise
@@ -133,6 +136,7 @@ class Viewer:
         self.ground = (np.zeros(2), 0.0, 1.0)
         self._uploaded = -1
         self._framed_loads = -1
+        self._framed_fits = 0
         self._targets: list[Any] = []
         self._target_key: tuple[int, int] | None = None
 
@@ -171,6 +175,9 @@ class Viewer:
         if self._framed_loads != self.state.loads:
             self.frame_leaf(scene_w / h, reset=True)
             self._framed_loads = self.state.loads
+        if self._framed_fits != self.state.reference.fits:   # a fit may change the leaf's size
+            self.frame_leaf(scene_w / h, reset=False)
+            self._framed_fits = self.state.reference.fits
 
         imgui.new_frame()
         self._run_ui(scene_w, w, h)
@@ -234,6 +241,7 @@ class Viewer:
         imgui.push_item_width(-165)
         self.files.draw()
         imgui.separator()
+        self.panel.draw_reference()
         self.panel.draw_edits()
         self.morph.draw()
         self.panel.draw_groups()
@@ -279,13 +287,22 @@ class Viewer:
         self.ctx.viewport = (0, 0, px_w, px_h)
         cam = self.camera.camera(int(round(scene_w)), h)
         light = _lighting(view.light_direction())
+        view_proj = cam.proj @ cam.view
+        ref = self.state.reference
+        # the reference photo is a backdrop: over the ground grid, under the leaf and its handles
+        behind = self.photo is not None and ref.visible and ref.image is not None
+        if behind and view.show_ground:
+            self.overlay.draw_ground(view_proj)
+        if self.photo is not None:
+            self.photo.draw_photo(view_proj, ref, self.state.params)
         self.renderer.set_camera(cam, srgb=True, lighting=light)
         self.renderer.draw(grid=view.grid, wireframe=view.wireframe)
-        view_proj = cam.proj @ cam.view
-        if view.show_ground:
+        if view.show_ground and not behind:
             self.overlay.draw_ground(view_proj)
         if view.show_controls:
             self.overlay.draw_controls(view_proj, self.input.hot)
+        if self.photo is not None:
+            self.photo.draw_markers(view_proj, ref, self.state.params, self.input.hot, show=view.show_controls)
         self.ctx.disable(moderngl.DEPTH_TEST)
         if msaa is not None:
             self.ctx.copy_framebuffer(fbo, msaa)
@@ -347,6 +364,7 @@ class Viewer:
             hotreload.compile_check(self.ctx)
             renderer = LeafRenderer(self.ctx)
             overlay = Overlay(self.ctx)
+            photo = PhotoLayer(self.ctx)
         except Exception as exc:  # ShaderError, a missing include, a driver message
             self.shader_error = hotreload.describe(exc)
             print(f"leafview view: shader reload failed, keeping the previous shaders:\n{exc}",
@@ -355,7 +373,9 @@ class Viewer:
         self.renderer.release()
         assert self.overlay is not None
         self.overlay.release()
-        self.renderer, self.overlay = renderer, overlay
+        if self.photo is not None:
+            self.photo.release()
+        self.renderer, self.overlay, self.photo = renderer, overlay, photo
         self._uploaded = -1
         self.shader_error = None
         self.state.message = "shaders reloaded"
@@ -371,7 +391,7 @@ class Viewer:
     def release(self) -> None:
         """Release every GL object and the imgui context (idempotent)."""
         self._release_targets()
-        for name in ("gui", "renderer", "overlay"):
+        for name in ("gui", "renderer", "overlay", "photo"):
             obj = getattr(self, name, None)
             if obj is not None:
                 obj.release()
