@@ -15,6 +15,7 @@ from leafview.cli.bench import SUITES
 from leafview.core.io import load_leaves
 from leafview.core.params import LeafParams
 from leafview.export.images import read_image, write_image
+from leafview.fit.photo_batch import fit_photos
 from leafview.fit.synthetic_photos import SyntheticPhoto, synthetic_photo, write_photo
 
 SIZE = (600, 600)
@@ -72,7 +73,8 @@ def test_options_that_do_not_apply_are_refused(photos, tmp_path, capsys):
     for argv, flag in (([str(path), "--scanlines", "8"], "--scanlines"),
                        ([str(tmp_path / "cloud.npy"), "--dpi", "300"], "--dpi"),
                        ([str(path.parent), "--base", "1,2"], "--base"),
-                       ([str(path), "--keep-unexplained"], "--keep-unexplained")):
+                       ([str(path), "--keep-unexplained"], "--keep-unexplained"),
+                       ([str(path), "--jobs", "2"], "--jobs")):
         assert main(["fit", *argv, "-o", str(tmp_path / "x" / "a.leaf.json")]) == 2
         assert flag in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
@@ -144,6 +146,22 @@ def test_the_fit_bench_fills_its_table(gl):
     ok = [r for r in res["rows"] if "error" not in r]
     assert ok and all(0.5 < r["iou"] <= 1.0 for r in ok) and res["iou_worst"] <= res["iou_median"]
     assert res["photos_per_s"] > 0.0 and set(res["stage_ms"]) == {"read", "outline", "fit", "texture", "measures"}
+    assert res["photos_per_s_pooled"] > 0.0 and res["pooled_failed"] == res["failed"] and "processes" in fit_photo.format_table(res)
     json.dumps(res, allow_nan=False)
     table = fit_photo.format_table(res)
     assert "goal ≥ 0.97" in table and "photos per second" in table
+
+
+def test_worker_processes_give_the_fits_of_one_process_in_order(tmp_path):
+    """fit_photos with 2 workers: the same leaves and error lines as in this process, in order."""
+    paths = [write_photo(synthetic_photo(seed, size=(320, 320)), tmp_path / f"p{seed}.jpg") for seed in (11, 12)]
+    whole = paths[0].read_bytes()
+    (tmp_path / "cut.jpg").write_bytes(whole[: len(whole) // 3])
+    paths.insert(1, tmp_path / "cut.jpg")
+    names = ["a", "b", "c"]
+    alone = list(fit_photos(paths, names, jobs=1, texture_size=32))
+    pooled = list(fit_photos(paths, names, jobs=2, texture_size=32))
+    assert isinstance(alone[1], str) and alone[1] == pooled[1] and "cut.jpg" in alone[1]
+    for a, b in ((alone[0], pooled[0]), (alone[2], pooled[2])):
+        assert not isinstance(a, str) and not isinstance(b, str)
+        assert a.parts == b.parts and np.array_equal(a.texture, b.texture)

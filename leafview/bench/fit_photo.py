@@ -41,6 +41,7 @@ from leafview.core.texture import LeafTexture
 from leafview.errors import LeafviewError
 from leafview.export.images import contact_sheet, write_image
 from leafview.fit.photo import ImageFit, fit_image, polygon_mask, top_view_iou
+from leafview.fit.photo_batch import default_jobs, fit_photos
 from leafview.fit.photo_texture import texture_uint8
 from leafview.fit.synthetic_photos import BACKGROUNDS, KINDS, SyntheticPhoto, synthetic_photo, write_photo
 from leafview.gpu.morph import shared_camera
@@ -187,13 +188,21 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
         info = gl_info(c)
     log_gl_renderer("fit", info["gl_renderer"])
     rows: list[dict[str, Any]] = []
-    with Progress(count) as progress, tempfile.TemporaryDirectory(prefix="leafview-bench-fit-") as tmp:
+    jobs = default_jobs()
+    with Progress(count + 1) as progress, tempfile.TemporaryDirectory(prefix="leafview-bench-fit-") as tmp:
+        paths: list[Path] = []
         for i in range(count):
             progress.step(f"photo {i + 1} of {count}")
             options = _options(i)
             sp = synthetic_photo(SEED + i, size=SIZE, **options)
-            path = write_photo(sp, Path(tmp) / f"photo_{i:03d}.jpg")
-            rows.append({"seed": SEED + i, **options, "face_down": sp.face_down, **_measure(sp, path)})
+            paths.append(write_photo(sp, Path(tmp) / f"photo_{i:03d}.jpg"))
+            rows.append({"seed": SEED + i, **options, "face_down": sp.face_down, **_measure(sp, paths[-1])})
+        # the same photos again, one worker process per core (what `leafview fit DIR` does): the
+        # pool's start-up is included
+        progress.step(f"the {count} photos in {jobs} worker processes")
+        t0 = time.perf_counter()
+        pooled = list(fit_photos(paths, [p.stem for p in paths], jobs=jobs))
+        pooled_s = time.perf_counter() - t0
     ok = [r for r in rows if "error" not in r]
     ious = [r["iou"] if "error" not in r else 0.0 for r in rows]
     base = [r["base_pct"] for r in ok] or [float("nan")]
@@ -205,6 +214,8 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
             "base_pct_median": statistics.median(base), "base_pct_worst": max(base),
             "apex_pct_median": statistics.median(apex), "apex_pct_worst": max(apex),
             "photos_per_s": count / total if total > 0 else 0.0,
+            "jobs": jobs, "photos_per_s_pooled": count / pooled_s,
+            "pooled_failed": sum(1 for f in pooled if isinstance(f, str)),
             "cpu_ms": 1e3 * sum(r["cpu_s"] for r in rows) / count, "stage_ms": {k: 1e3 * v for k, v in stages.items()},
             "asymmetric_fits": sum(1 for r in ok if r["asymmetric"]), "rows": rows}
 
@@ -226,9 +237,10 @@ def format_table(res: dict[str, Any]) -> str:
              f" length  (goal ≤ {g['landmark_pct']:g} %: {mark(res['base_pct_worst'] <= g['landmark_pct'])})",
              f"  apex found, median / worst          {res['apex_pct_median']:.2f} % / {res['apex_pct_worst']:.2f} %  "
              f"(goal ≤ {g['landmark_pct']:g} %: {mark(res['apex_pct_worst'] <= g['landmark_pct'])})",
-             f"  photos per second, end to end       {res['photos_per_s']:.2f} /s  ({res['cpu_ms']:.0f} ms CPU a photo; "
-             f"goal ≥ {g['photos_per_s']:g} /s: {mark(res['photos_per_s'] >= g['photos_per_s'])})",
-             f"  2 cores, one photo per core (from the CPU time)  {2000.0 / res['cpu_ms']:.2f} /s",
+             f"  photos per second, one process      {res['photos_per_s']:.2f} /s  ({res['cpu_ms']:.0f} ms CPU a photo)",
+             f"  photos per second, {res['jobs']} processes     {res['photos_per_s_pooled']:.2f} /s  (pool start-up "
+             f"included; goal ≥ {g['photos_per_s']:g} /s on 2 cores: "
+             f"{mark(res['photos_per_s_pooled'] >= g['photos_per_s'])})",
              "  wall time per stage, median        " + ", ".join(f"{k} {v:.0f} ms" for k, v in res["stage_ms"].items()),
              f"  failed photos {res['failed']}, fitted as two halves {res['asymmetric_fits']}"]
     for r in res["rows"]:

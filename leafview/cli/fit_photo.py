@@ -47,9 +47,10 @@ from leafview.cli.args import (
 from leafview.core.io import save_leaves, save_params
 from leafview.core.params import LeafParams
 from leafview.core.texture import LeafTexture, with_folder
-from leafview.errors import GLUnavailable, LeafviewError, UsageError, one_line
+from leafview.errors import GLUnavailable, UsageError, one_line
 from leafview.export.images import contact_sheet, write_image
 from leafview.fit.photo import DPI_RANGE, ImageFit, fit_image
+from leafview.fit.photo_batch import MAX_JOBS, default_jobs, fit_photos
 from leafview.fit.photo_texture import MAX_TEXTURE_SIZE, MIN_TEXTURE_SIZE, texture_uint8
 from leafview.gpu import default_renderer
 from leafview.gpu.renderer import LeafRenderer
@@ -61,7 +62,8 @@ SHEET_WIDTH = 2048          # the contact sheet's width at most, in pixels
 _CELL = 224                 # a contact sheet tile's side for up to _FULL_CELLS photos
 _FULL_CELLS = 60
 _CLOUD_OPTIONS = (("scanlines", "--scanlines"), ("iterations", "--iterations"), ("keep_unexplained", "--keep-unexplained"))
-_PHOTO_OPTIONS = (("base", "--base"), ("apex", "--apex"), ("dpi", "--dpi"), ("texture_size", "--texture-size"))
+_PHOTO_OPTIONS = (("base", "--base"), ("apex", "--apex"), ("dpi", "--dpi"), ("texture_size", "--texture-size"),
+                  ("jobs", "--jobs"))
 
 
 # -- options -------------------------------------------------------------------------------------------
@@ -88,6 +90,10 @@ def _dpi(text: str) -> float:
     return value
 
 
+def _jobs(text: str) -> int:
+    return int_in_range(text, lo=1, hi=MAX_JOBS, what="worker processes", name="--jobs")
+
+
 def _texture_size(text: str) -> int:
     return int_in_range(text, lo=MIN_TEXTURE_SIZE, hi=MAX_TEXTURE_SIZE, what="texels", name="--texture-size")
 
@@ -101,6 +107,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="photos: dots per inch, replacing the file's resolution (the leaf's scale becomes metres)")
     p.add_argument("--texture-size", type=_texture_size, default=None, metavar="N",
                    help="photos: side of the square front texture in texels (default 512)")
+    p.add_argument("--jobs", type=_jobs, default=None, metavar="N",
+                   help=f"a folder of photos: worker processes (default: one per core, at most {MAX_JOBS})")
 
 
 def is_photo_input(path: str | Path) -> bool:
@@ -172,6 +180,8 @@ def run(args: argparse.Namespace) -> int:
     src = Path(args.input)
     if src.is_dir():
         return _run_folder(args, src)
+    if args.jobs is not None:
+        raise UsageError(f"--jobs applies to a folder of photos, not to the one photo {src}")
     out = refuse_directory("-o", args.output)
     name = out.name.lower()
     leaf_set = name.endswith(".leaves.json")
@@ -228,13 +238,11 @@ def _run_folder(args: argparse.Namespace, src: Path) -> int:
     labels: list[str] = []
     started = time.perf_counter()
     bar = progress_bar(total=len(photos), unit="photo", desc="fitting", quiet=args.quiet)
+    jobs = args.jobs or default_jobs()
     try:
-        for photo, name in zip(photos, names):
-            try:
-                fit = fit_image(photo, name=name, **_options(args))
-            except Exception as exc:   # one photo's failure is reported, and the batch goes on
-                what = str(exc) if isinstance(exc, LeafviewError) else f"{type(exc).__name__}: {exc}"
-                entries.append({"photo": photo.name, "error": one_line(what if str(photo) in what else f"{photo}: {what}")})
+        for photo, name, fit in zip(photos, names, fit_photos(photos, names, jobs=jobs, **_options(args))):
+            if isinstance(fit, str):     # one photo's failure is reported, and the batch goes on
+                entries.append({"photo": photo.name, "error": fit})
                 bar.update(1)
                 continue
             leaf = out / f"{name}.leaves.json" if fit.asymmetric else out / f"{name}.leaf.json"

@@ -375,7 +375,7 @@ OPTIONS = {
                 "--distance", "--sun-elevation", "--light-intensity", "--split", "--shard-size", "--engine",
                 "--workers", "--address", "--gpus-per-worker", "-q"],
     "fit": ["-o", "--scanlines", "--iterations", "--keep-unexplained", "-q", "--base", "--apex", "--dpi",
-            "--texture-size"],
+            "--texture-size", "--jobs"],
     "capture": ["-o", "--delta-plane", "--report", "--seed", "-q"],
     "eval-capture": ["--capture", "--truth", "--json", "--seed", "-q"],
 }
