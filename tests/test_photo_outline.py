@@ -105,6 +105,23 @@ def test_base_and_apex_within_two_percent_of_the_length(case: Case) -> None:
     assert np.hypot(*(traced.apex - photo.apex)) <= 0.02 * length, (traced.apex, photo.apex)
 
 
+# leaves whose apex is not simply the farthest point along the principal axis: wider than long with
+# a blunt apex (1501, 1517), an emarginate apex in a notch (1507), a notched apex and a petiole cut off
+# by the border (1503: the veins, not the notch, tell the base), round and wider than long (3006, 3022)
+AWKWARD: list[Case] = [(1501, "cream", "landmark", True), (1517, "blue", "landmark", True),
+                       (1507, "blue", "asymmetric", True), (1503, "grey", "asymmetric", True),
+                       (3006, "cream", "serrated", False), (3022, "blue", "serrated", False)]
+
+
+@pytest.mark.parametrize("case", AWKWARD)
+def test_the_apex_is_the_midribs_end_on_wide_notched_and_blunt_leaves(case: Case) -> None:
+    photo, traced = _photo(*case), _traced(case)
+    length = photo.length_px
+    assert np.hypot(*(traced.apex - photo.apex)) <= 0.02 * length, (traced.apex, photo.apex)
+    # the base at least on the right end (a petiole in a cordate notch can hide a few % of it)
+    assert np.hypot(*(traced.base - photo.base)) <= 0.06 * length, (traced.base, photo.base)
+
+
 @pytest.mark.parametrize("case", PETIOLED[:4])
 def test_petiole_found_with_its_length(case: Case) -> None:
     photo, traced = _photo(*case), _traced(case)

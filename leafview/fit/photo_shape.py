@@ -26,20 +26,28 @@
   leaves the even petiole), then straight on into the blade, the mask's chord across the walk is
   measured; the blade starts where the half-chord first exceeds twice the petiole's half-width.
   The growth of the chord just past that point is extrapolated back (by
-  :data:`BASE_EXTRAPOLATION` of the way to zero width), which finds the tip of a wedge-shaped
-  (cuneate) base hidden in the petiole's width; a rounded or cordate base widens at once and
-  stays put.
+  :data:`BASE_EXTRAPOLATION` of the way to zero width: all of it), which finds the tip of a
+  wedge-shaped (cuneate) base hidden in the petiole's width; a rounded or cordate base widens at
+  once and stays put.
 * **Base without a petiole.** The blade's principal axis (through its centroid) meets the
-  outline at two ends. The base end is, in order: the end opposite a given apex; the end with a
-  notch (a crossing more than :data:`NOTCH_DEPTH` of the length inside the outline's convex hull:
-  a cordate base); the end the secondary veins open away from (:func:`_vein_sense`, when clear);
-  the blunter end (wider by 15 % at a tenth of the length from it: apices are usually acute);
-  else the end nearer the widest part (most leaves are widest below the middle), with a warning.
+  outline at two ends; on a blade wider than long the midrib runs across that axis, which the
+  veins tell (:func:`_vein_sense` clear across it and :data:`VEIN_TURN` times clearer than
+  along it), and the axis is turned by 90°. The base end is, in order: the end opposite a given
+  apex; the end the secondary veins open away from (when clear: an emarginate apex has a notch
+  too); the end with a notch (a crossing more than :data:`NOTCH_DEPTH` of the length inside the
+  outline's convex hull: a cordate base); the blunter end (wider by 15 % at a tenth of the length
+  from it: apices are usually acute); else the end nearer the widest part (most leaves are
+  widest below the middle), with a warning.
   The base itself is the notch's sinus; else the outline point farthest from the apex, unless that
   lies more than :data:`SHOULDER` of the width off the axis (a shoulder of a truncate base), where
   the axis' crossing is used. A nearly round blade (principal axes within 15 %) gets a warning:
   its axis, so its ends, are a guess.
-* **Apex.** The outline point farthest from the base within 45° of the axis pointing away from it.
+* **Apex** (:func:`_midrib_end`): the midrib's end, seen from the base along the line through the
+  blade's centroid (the principal axis misleads on a blade wider than long). Where that line
+  leaves the outline in a notch (an emarginate or two-lobed apex) it is the notch's sinus; else
+  the outline point farthest from the base within 45° of the line, or, on a blunt apex (many
+  points nearly as far, spread across the line), the one of those nearest the line (:func:`_apex`;
+  the base opposite an apex is found the same way).
 * **Outline** (:func:`fit_closed_bspline`).
 """
 
@@ -67,12 +75,15 @@ NECK_LENGTH = 1.8             # pixels along the neck / the smaller part's peak,
 PETIOLE_RADIUS = 0.25         # opening radius / largest inscribed radius of the mask
 PETIOLE_MIN_LENGTH = 0.04     # petiole length / extent of the leaf, at least
 PETIOLE_MIN_RADIUS = 1.0      # px: a thinner strand is an apex tip or noise
-PETIOLE_EVENNESS = 0.6        # width of the free third / width of the middle third, at least
-BASE_EXTRAPOLATION = 0.75    # of the distance back to zero width at the blade's first slope
+PETIOLE_EVENNESS = 0.7        # width of the free third / width of the middle third, at least
+BASE_EXTRAPOLATION = 1.0      # of the distance back to zero width at the blade's first slope
 VEIN_SENSE = 0.03             # |vein sense| from which the veins tell the apex's end
+VEIN_TURN = 2.0               # the veins' sense across the principal axis / along it, from which the midrib runs across
 SHOULDER = 1 / 3              # farthest point off the axis by this much of the width: a truncate base
 ROUND_BLADE = 1.15            # principal standard deviations closer than this: a round blade
 NOTCH_DEPTH = 0.02            # of the blade's length
+BLUNT_DISTANCE = 0.01         # outline points this close (of the distance) to the farthest from the base ...
+BLUNT_SPREAD = 0.2            # ... spread across the midrib by more than this (of the distance): a blunt apex
 OUTLINE_POINTS = 512
 OUTLINE_TOLERANCE = 0.0025    # Hausdorff distance of the spline to the traced contour / length
 OUTLINE_WARN = 0.005
@@ -434,27 +445,34 @@ def _end_point(contour: Array, s: Array, lat: Array, low: bool, hull: Array) -> 
     return np.asarray(point, np.float64).copy(), depth
 
 
-def _vein_sense(grey: NDArray[np.float32] | None, blade: NDArray[np.bool_], centre: Array, axis: Array) -> float:
-    """Which way the secondary veins point along the axis, from -1 (towards -axis) to 1.
+def _vein_sense(grey: NDArray[np.float32] | None, blade: NDArray[np.bool_], centre: Array,
+                axis: Array) -> tuple[float, float]:
+    """Which way the secondary veins point along the axis, from -1 (towards -axis) to 1, and the
+    same along the axis turned by +90° (x right, y down: (-axis_y, axis_x)).
 
     Pinnate secondary veins leave the midrib at an acute angle opening towards the apex, a
     chevron. Across a vein the brightness gradient (g_s, g_l) in the axis frame (along, across)
     is perpendicular to the vein, so a vein at angle φ to the axis has g_s·g_l ∝ -sin φ cos φ,
     whose sign flips between the two sides of the midrib. The gradient products summed over each
     side of the axis (the blade's edge excluded), differenced and normalised by the gradient
-    energy, give the sense; ~0 when no veins show."""
+    energy, give the sense; ~0 when no veins show. Along the turned axis the halves are the base's
+    and the apex's, where both sides of the midrib agree, so the sums cancel unless the midrib runs
+    across the first axis (a blade wider than long): then that one is the clear one."""
     if grey is None:
-        return 0.0
+        return 0.0, 0.0
     inner = ndimage.binary_erosion(blade, _EIGHT, iterations=3)
     if inner.sum() < 50:
-        return 0.0
+        return 0.0, 0.0
     gy, gx = ndimage.sobel(grey, axis=0), ndimage.sobel(grey, axis=1)
     yx = np.argwhere(inner)
     gxs, gys = gx[inner], gy[inner]
     g_s, g_l = gxs * axis[0] + gys * axis[1], -gxs * axis[1] + gys * axis[0]
-    side = np.sign((yx[:, ::-1] - centre) @ np.array([-axis[1], axis[0]]))
+    rel = yx[:, ::-1] - centre
+    side, ahead = np.sign(rel @ np.array([-axis[1], axis[0]])), np.sign(rel @ axis)
     energy = float(np.sum(g_s * g_s + g_l * g_l))
-    return float(-np.sum(side * g_s * g_l) / energy) if energy > 0 else 0.0
+    if energy <= 0:
+        return 0.0, 0.0
+    return float(-np.sum(side * g_s * g_l) / energy), float(-np.sum(ahead * g_s * g_l) / energy)
 
 
 def _base_without_petiole(contour: Array, centre: Array, axis: Array, apex: Array | None, step: float,
@@ -470,10 +488,10 @@ def _base_without_petiole(contour: Array, centre: Array, axis: Array, apex: Arra
     note = None
     if apex is not None:
         b = int(np.argmax([np.hypot(*(e - apex)) for e in ends]))
-    elif max(notch) > NOTCH_DEPTH * extent and min(notch) < 0.5 * NOTCH_DEPTH * extent:
-        b = int(np.argmax(notch))
     elif abs(veins) >= VEIN_SENSE:
         b = 0 if veins > 0 else 1
+    elif max(notch) > NOTCH_DEPTH * extent and min(notch) < 0.5 * NOTCH_DEPTH * extent:
+        b = int(np.argmax(notch))
     elif max(near) > 1.15 * max(min(near), 1e-9):
         b = int(np.argmax(near))
     else:
@@ -494,11 +512,32 @@ def _base_without_petiole(contour: Array, centre: Array, axis: Array, apex: Arra
 
 
 def _apex(contour: Array, base: Array, axis: Array, cone_deg: float = 45.0) -> Array:
-    """The contour point farthest from ``base`` within ``cone_deg`` of ``axis``."""
-    rel = contour - base
-    dist = np.hypot(*rel.T)
-    cone = rel @ axis >= math.cos(math.radians(cone_deg)) * dist
+    """The contour point farthest from ``base`` within ``cone_deg`` of ``axis``; on a blunt end
+    (the points within :data:`BLUNT_DISTANCE` of that distance spread more than
+    :data:`BLUNT_SPREAD` of it across the axis, where the farthest one is a matter of noise), the
+    one of those nearest the axis line."""
+    s, lat = _frame(contour, base, axis)
+    dist = np.hypot(s, lat)
+    cone = s >= math.cos(math.radians(cone_deg)) * dist
+    top = float(dist[cone].max())
+    near = cone & (dist >= (1 - BLUNT_DISTANCE) * top)
+    if float(np.ptp(lat[near])) > BLUNT_SPREAD * top:
+        return contour[int(np.argmin(np.where(near, np.abs(lat), np.inf)))].copy()
     return contour[int(np.argmax(np.where(cone, dist, -1.0)))].copy()
+
+
+def _midrib_end(contour: Array, base: Array, centre: Array) -> Array:
+    """The apex seen from ``base``: the contour point farthest from it within 45° of the line from
+    it through the blade's centroid, unless that line's far crossing of the contour lies in a notch
+    (deeper than :data:`NOTCH_DEPTH` of the length inside the convex hull: an emarginate or
+    two-lobed apex), where the notch's sinus is the midrib's end."""
+    away = centre - base
+    away = away / max(float(np.hypot(*away)), 1e-9)
+    s, lat = _frame(contour, base, away)
+    end, depth = _end_point(contour, s, lat, False, ConvexHull(contour).equations)
+    if depth > NOTCH_DEPTH * float(s.max() - s.min()):
+        return end
+    return _apex(contour, base, away)
 
 
 # -- the whole -------------------------------------------------------------------------------------------------
@@ -558,13 +597,14 @@ def leaf_shape(mask: NDArray[np.bool_], *, fine: NDArray[np.bool_] | None = None
         warnings.append("the blade is nearly round, so which way its axis runs is a guess: check the base and apex, "
                         "or give --base and --apex")
     if base is None:
-        veins = _vein_sense(grey, blade_w, centre_w, axis)
+        veins, across = _vein_sense(grey, blade_w, centre_w, axis)
+        if abs(across) >= VEIN_SENSE and abs(across) > VEIN_TURN * abs(veins):
+            axis, veins = np.array([-axis[1], axis[0]]), across     # the midrib runs across the principal axis
         base, note = _base_without_petiole(contour, centre, axis, apex, float(f), veins)
         if note:
             warnings.append(note)
-    away = axis if (centre - base) @ axis >= 0 else -axis
     if apex is None:
-        apex = _apex(contour, base, away)
+        apex = _midrib_end(contour, base, centre)
     length = max(float(np.hypot(*(apex - base))), 1.0)
     controls, hausdorff = fit_closed_bspline(contour, max(0.5 * f, OUTLINE_TOLERANCE * length), 0.5 * f)
     if hausdorff > max(0.75 * f, OUTLINE_WARN * length):
