@@ -6,7 +6,7 @@ texture file however many leaves use it; a missing image refused before anything
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +16,7 @@ import trimesh
 from support.gltf_read import read_gltf
 from support.validate import usd_errors
 from test_export import assert_gltf_clean
+from test_export_scene import StandInScene
 
 import leafview.export.objply as objply
 from leafview.cli import main
@@ -289,20 +290,6 @@ def test_image_names_come_from_the_files_and_stay_unique(tmp_path, ovate):
 
 
 # -- scenes ------------------------------------------------------------------------------------
-@dataclass
-class StandInScene:
-    species: list[LeafParams]
-    shape_ids: np.ndarray
-    matrices: np.ndarray
-    stems: tuple | None = None
-
-    def shapes(self) -> list[LeafParams]:
-        return list(self.species)
-
-    def __len__(self) -> int:
-        return len(self.shape_ids)
-
-
 @pytest.mark.parametrize("suffix", SUFFIXES)
 @pytest.mark.usefixtures("gltf_validator")
 def test_a_textured_species_writes_its_image_once(tmp_path, presets, suffix):
