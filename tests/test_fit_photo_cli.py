@@ -4,6 +4,7 @@ together and loading back, a folder's report and contact sheet, refusals that wr
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +13,7 @@ import pytest
 from leafview.bench import fit_photo
 from leafview.cli import main
 from leafview.cli.bench import SUITES
-from leafview.core.io import load_leaves
+from leafview.core.io import load_leaves, save_leaves
 from leafview.core.params import LeafParams
 from leafview.export.images import read_image, write_image
 from leafview.fit.photo_batch import fit_photos
@@ -165,3 +166,25 @@ def test_worker_processes_give_the_fits_of_one_process_in_order(tmp_path):
     for a, b in ((alone[0], pooled[0]), (alone[2], pooled[2])):
         assert not isinstance(a, str) and not isinstance(b, str)
         assert a.parts == b.parts and np.array_equal(a.texture, b.texture)
+
+
+def test_the_two_halves_render_as_one_leaf(gl, photos, tmp_path, capsys):
+    """``leafview render NAME.leaves.json -o NAME.png``: the halves of an asymmetric leaf (a pair
+    alone) come out as one picture, textured, each half on its side of the midrib."""
+    path, sp = photos["odd"]
+    marks = ["--base", _point(sp.base), "--apex", _point(sp.apex), "--texture-size", "64"]
+    assert main(["fit", str(path), "-o", str(tmp_path / "odd.leaves.json"), *marks, "-q"]) == 0
+    assert main(["render", str(tmp_path / "odd.leaves.json"), "-o", str(tmp_path / "odd.png"), "--size", "96"]) == 0
+    assert "2 leaves together" in capsys.readouterr().out
+    alpha = read_image(tmp_path / "odd.png")[0][..., 3] > 127
+    cols = np.flatnonzero(alpha.any(axis=0))
+    middle = (cols.min() + cols.max()) / 2
+    assert alpha.sum() > 800 and alpha[:, : int(middle) - 5].any() and alpha[:, int(middle) + 5:].any()
+    # a set of unrelated leaves still needs a folder, a sheet or --together
+    halves = load_leaves(tmp_path / "odd.leaves.json")
+    save_leaves([h.replace(shape=replace(h.shape, half=0)) for h in halves], tmp_path / "two.leaves.json")
+    assert main(["render", str(tmp_path / "two.leaves.json"), "-o", str(tmp_path / "two.png")]) == 2
+    assert "--together" in capsys.readouterr().err
+    assert main(["render", str(tmp_path / "two.leaves.json"), "-o", str(tmp_path / "two.png"), "--together",
+                 "-q"]) == 0 and (tmp_path / "two.png").exists()
+    assert main(["render", str(tmp_path / "two.leaves.json"), "-o", str(tmp_path / "two.exr"), "--together"]) == 2

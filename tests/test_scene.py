@@ -92,6 +92,28 @@ def test_vectorised_rows_match_per_leaf_packing(small):
     assert not np.allclose(rows["xs"][0], rows["xs"][1])  # leaves differ
 
 
+def test_varied_leaves_keep_their_rows_in_order_and_read_back(tmp_path):
+    """acuminate's second and third feet (v̄ 0.45, 0.62) cross under 30 % variation: a varied leaf
+    keeps them in order (found by the CLI fuzz run: `export SCENE -o x.leaves.json` wrote leaves
+    that did not read back), and the GPU rows keep them the same way."""
+    from leafview.core.io import load_leaves, save_leaves
+    from leafview.gpu.scene import pack_scene
+    from leafview.scene.spec import VBAR_GAP
+
+    from leafview.resources import builtin_presets
+
+    acuminate = LeafParams.load(builtin_presets()["acuminate"])
+    scene = build_scene(SceneSpec(species=(acuminate,), leaves=300, plants=3, variation=0.3, seed=4))
+    raw = scene.factors[:, [6, 9, 12]] * np.array([row[0] for row in scene.species[0].shape.silhouette[:3]])
+    assert (np.diff(np.clip(raw, 0.02, 0.98), axis=1) <= 0).any()      # the case happens in this scene
+    leaves = [scene.leaf(i) for i in range(len(scene))]
+    vbar = np.array([[row[0] for row in leaf.shape.silhouette] for leaf in leaves])
+    assert (np.diff(vbar, axis=1) >= VBAR_GAP - 1e-12).all()
+    save_leaves(leaves, tmp_path / "x.leaves.json")
+    assert [leaf.shape for leaf in load_leaves(tmp_path / "x.leaves.json")] == [leaf.shape for leaf in leaves]
+    np.testing.assert_allclose(pack_scene(scene)["vbar"][:, :3], vbar, rtol=2e-6, atol=1e-6)
+
+
 def test_batches_respect_the_block_limit():
     from leafview.gpu.scene import SceneLimitError, plan_batches
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +52,7 @@ from leafview.export.views import (
 )
 from leafview.gpu import default_renderer
 from leafview.gpu.renderer import BATCH
+from leafview.gpu.sheets import render_leaves
 from leafview.scene.camera import MAX_RING_ELEVATION, RING_ELEVATIONS
 from leafview.scene.spec import Scene, scene_from_leaves
 
@@ -183,6 +185,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--format", choices=("png", "exr", "tif"), default=None,
                         help="image type (default: from the -o suffix, else png)")
     parser.add_argument("--sheet", action="store_true", help="one labelled contact sheet instead of one image each")
+    parser.add_argument("--together", action="store_true",
+                        help="one image of all the leaves as placed (e.g. the two halves of an asymmetric leaf "
+                             "in a .leaves.json; such a pair alone is drawn together without it)")
     parser.add_argument("--grid", type=grid, default=None, metavar="NUxNV",
                         help=f"(u, v) samples (default 33x65; with --views {VIEW_GRID[0]}x{VIEW_GRID[1]})")
     add_views_arguments(parser)
@@ -195,6 +200,19 @@ def _plan(args: argparse.Namespace, count: int) -> tuple[str, Path, str]:
     """(mode, output path, format) with mode 'file', 'dir' or 'sheet'; raises UsageError."""
     out = Path(args.output)
     suffix_fmt = format_of(out)
+    if args.together:
+        if args.sheet:
+            raise UsageError("--together and --sheet: choose one image of all the leaves or a sheet of each")
+        if out.suffix and suffix_fmt is None:
+            raise UsageError(f"-o {out}: unknown image type {out.suffix!r} (use .png or .tif)")
+        fmt = args.format or suffix_fmt or "png"
+        if fmt == "exr":
+            raise UsageError("--together writes an 8-bit sRGB image: use .png or .tif")
+        if args.format and suffix_fmt and args.format != suffix_fmt:
+            raise UsageError(f"-o {out} is a .{suffix_fmt} file but --format {args.format} was given")
+        out = out if out.suffix else out.with_suffix("." + fmt)
+        refuse_directory("-o", out)
+        return "together", out, fmt
     if args.sheet or count == 1 and out.suffix:
         if out.suffix and suffix_fmt is None:
             raise UsageError(f"-o {out}: unknown image type {out.suffix!r} (use .png, .exr or .tif)")
@@ -208,8 +226,15 @@ def _plan(args: argparse.Namespace, count: int) -> tuple[str, Path, str]:
             raise UsageError("--sheet writes an 8-bit labelled image: use .png or .tif")
         return ("sheet" if args.sheet else "file"), out, fmt
     if suffix_fmt is not None:
-        raise UsageError(f"{count} presets need -o DIR (one image each) or --sheet, not the file {out}")
+        raise UsageError(f"{count} presets need -o DIR (one image each), --sheet or --together, not the file {out}")
     return "dir", output_directory(out), args.format or "png"
+
+
+def is_half_pair(leaves: Sequence[LeafParams]) -> bool:
+    """Whether ``leaves`` are the two one-sided halves of one leaf (``shape.half`` -1 and +1, one
+    placement), as ``leafview fit PHOTO -o NAME.leaves.json`` writes an asymmetric leaf."""
+    return (len(leaves) == 2 and sorted(leaf.shape.half for leaf in leaves) == [-1, 1]
+            and leaves[0].transform == leaves[1].transform)
 
 
 def _describe(leaf: LeafParams, args: argparse.Namespace) -> str:
@@ -238,6 +263,7 @@ def run(args: argparse.Namespace) -> int:
     # validate everything before writing anything: finite and within what float32 can frame, or exit 2
     # naming the file, the leaf and the field
     leaves = load_framable_leaves(expand_presets(args.presets))
+    args.together = args.together or (len(args.presets) == 1 and not args.sheet and is_half_pair(leaves))
     mode, out, fmt = _plan(args, len(leaves))
     names = [leaf.name for leaf in leaves]
     # one safe, unique file name per leaf: never outside -o DIR, never one over another
@@ -252,6 +278,11 @@ def run(args: argparse.Namespace) -> int:
         images: list[Any] = renderer.render_many(batch, (args.size, args.size), args.view, linear=linear, **kwargs)
         return images
 
+    if mode == "together":
+        image = render_leaves(leaves, (args.size, args.size), args.view, samples=None, **kwargs)
+        write_image(out, image, description=f"leafview {__version__}: {len(leaves)} leaves together, {args.view} view")
+        report(args, f"wrote {out} ({args.size}×{args.size}, {args.view} view, {len(leaves)} leaves together)")
+        return EXIT_OK
     if mode == "file":
         image = draw_all(leaves[:1])[0]
         write_image(out, image, params=leaves[0], description=_describe(leaves[0], args))

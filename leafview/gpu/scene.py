@@ -72,7 +72,7 @@ from leafview.gpu.resources import GpuResources, JitterTable, RowTexture, record
 from leafview.gpu.textures import LeafTextures
 from leafview.resources import resolve_preset
 from leafview.scene.camera import Camera, top_down
-from leafview.scene.spec import Scene, SceneSpec
+from leafview.scene.spec import VBAR_GAP, Scene, SceneSpec
 
 __all__ = ["LOD_GRIDS", "CullSettings", "SceneRenderer", "SceneLimitError", "pack_scene", "species_cull", "plan_batches",
            "frustum_planes", "cull_reference"]
@@ -186,6 +186,8 @@ def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
         omega *= scene.factors[start + a:start + b][:, _OMEGA_FACTORS].reshape(b - a, len(_OMEGA_MEMBERS), 3)
         vbar = omega[:, _OMEGA_MEMBERS.index("vbar")]
         np.clip(vbar, np.float32(0.02), np.float32(0.98), out=vbar)
+        for k in (1, 2):   # the feet stay in order, as vary_shape keeps them
+            np.maximum(vbar[:, k], vbar[:, k - 1] + np.float32(VBAR_GAP), out=vbar[:, k])
         colours = _vec4_run(part, ("front", "back"))[:, :, :3]
         colours *= scene.tint[start + a:start + b, None, None].astype(np.float32)
         np.clip(colours, np.float32(0.0), np.float32(1.0), out=colours)

@@ -306,9 +306,13 @@ def save_scene(spec: SceneSpec, path: str | os.PathLike[str]) -> None:
 
 
 # -- the expanded scene ----------------------------------------------------------------------
+VBAR_GAP = 1e-3   # smallest spacing of a varied leaf's first three silhouette feet v̄
+
+
 def vary_shape(shape: Shape, factors: NDArray[np.floating]) -> Shape:
     """``shape`` with each Ω component of :data:`VARIED` multiplied by its factor; ``v̄`` clamped
-    to [0.02, 0.98]. The vectorised twin for GPU records is
+    to [0.02, 0.98] and kept increasing (each row at least :data:`VBAR_GAP` above the one before,
+    so a varied leaf is a valid leaf: it saves and reads back). The vectorised twin for GPU records is
     :func:`leafview.gpu.scene.pack_scene` (a test checks they agree)."""
     f = np.asarray(factors, np.float64)
     a1 = _vec3(np.asarray(shape.a1) * f[0:3])
@@ -316,7 +320,10 @@ def vary_shape(shape: Shape, factors: NDArray[np.floating]) -> Shape:
     rows: list[Vec3] = []
     for k, (vb, xs, zs) in enumerate(shape.silhouette[:3]):
         g = f[6 + 3 * k: 9 + 3 * k]
-        rows.append((float(np.clip(vb * g[0], 0.02, 0.98)), float(xs * g[1]), float(zs * g[2])))
+        v = float(np.clip(vb * g[0], 0.02, 0.98))
+        if rows:   # the rows' feet stay in order: a row varied past the one above it stops VBAR_GAP above it
+            v = max(v, rows[-1][0] + VBAR_GAP)
+        rows.append((v, float(xs * g[1]), float(zs * g[2])))
     rows += [(r[0], r[1], r[2]) for r in shape.silhouette[3:]]
     # rows beyond the paper's three (an extended silhouette) keep their species' values
     zf = tuple(float(x) for x in np.asarray(shape.zf[:3]) * f[15:18]) + tuple(shape.zf[3:])

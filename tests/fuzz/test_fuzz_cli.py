@@ -361,7 +361,7 @@ VALUES = ["", "-", "--", "0", "-1", "3", "8", "1e400", "nan", "99999999999999999
           "ovate", "ovate,maize", "maple", "cordate", "é", "a" * 300 + ".png", "out/" + "a" * 300 + ".png",
           "@TRAP@/abs.png", "/proc/leafview-fuzz.png", "out/x.png/y.png", "in/sub/ok.toml", "in/sub"]
 OPTIONS = {
-    "render": ["-o", "--size", "--view", "--format", "--sheet", "--grid", "-q", "--help"],
+    "render": ["-o", "--size", "--view", "--format", "--sheet", "--together", "--grid", "-q", "--help"],
     "export": ["-o", "--format", "--resolution", "--backend", "--length-m", "--up", "--back-faces", "--instancing",
                "--digits", "-q"],
     "scene": ["--leaves", "--species", "--layout", "--seed", "--plants", "--variation", "--no-stems", "-o", "--size",
