@@ -98,9 +98,8 @@ def test_varied_leaves_keep_their_rows_in_order_and_read_back(tmp_path):
     that did not read back), and the GPU rows keep them the same way."""
     from leafview.core.io import load_leaves, save_leaves
     from leafview.gpu.scene import pack_scene
-    from leafview.scene.spec import VBAR_GAP
-
     from leafview.resources import builtin_presets
+    from leafview.scene.spec import VBAR_GAP
 
     acuminate = LeafParams.load(builtin_presets()["acuminate"])
     scene = build_scene(SceneSpec(species=(acuminate,), leaves=300, plants=3, variation=0.3, seed=4))
