@@ -38,6 +38,7 @@ from leafview.bench import PAPER_LEAVES_PER_S, THUMB_GRID, THUMB_SIZE
 from leafview.bench.instancing import BYTES_GRID, SCENE_GRID, SCENE_SIZE, bytes_per_leaf, instanced_vs_baked
 from leafview.bench.latency import measure_edit_latency
 from leafview.bench.timing import Progress, bench_context, gl_info, median_time
+from leafview.core.colour import linear_to_srgb
 from leafview.core.params import Bending, Jitter, LeafParams, Shape
 from leafview.deform.fbm import RIPPLE_SAMPLES
 from leafview.deform.surface import evaluate, grid_uv, tessellate
@@ -103,8 +104,7 @@ class ThumbnailMesh:
 
 def srgb(linear: Any) -> tuple[float, float, float]:
     """sRGB encoding of a linear RGB colour (what ``leaf.frag`` writes)."""
-    c = np.clip(np.asarray(linear, np.float64), 0.0, 1.0)
-    e = np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+    e = linear_to_srgb(linear)
     return float(e[0]), float(e[1]), float(e[2])
 
 

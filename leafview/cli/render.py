@@ -197,23 +197,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _plan(args: argparse.Namespace, count: int) -> tuple[str, Path, str]:
-    """(mode, output path, format) with mode 'file', 'dir' or 'sheet'; raises UsageError."""
+    """(mode, output path, format) with mode 'file', 'dir', 'sheet' or 'together'; raises UsageError."""
     out = Path(args.output)
     suffix_fmt = format_of(out)
-    if args.together:
-        if args.sheet:
-            raise UsageError("--together and --sheet: choose one image of all the leaves or a sheet of each")
-        if out.suffix and suffix_fmt is None:
-            raise UsageError(f"-o {out}: unknown image type {out.suffix!r} (use .png or .tif)")
-        fmt = args.format or suffix_fmt or "png"
-        if fmt == "exr":
-            raise UsageError("--together writes an 8-bit sRGB image: use .png or .tif")
-        if args.format and suffix_fmt and args.format != suffix_fmt:
-            raise UsageError(f"-o {out} is a .{suffix_fmt} file but --format {args.format} was given")
-        out = out if out.suffix else out.with_suffix("." + fmt)
-        refuse_directory("-o", out)
-        return "together", out, fmt
-    if args.sheet or count == 1 and out.suffix:
+    if args.together and args.sheet:
+        raise UsageError("--together and --sheet: choose one image of all the leaves or a sheet of each")
+    if args.together or args.sheet or count == 1 and out.suffix:
+        mode = "together" if args.together else "sheet" if args.sheet else "file"
         if out.suffix and suffix_fmt is None:
             raise UsageError(f"-o {out}: unknown image type {out.suffix!r} (use .png, .exr or .tif)")
         if args.format and suffix_fmt and args.format != suffix_fmt:
@@ -222,9 +212,9 @@ def _plan(args: argparse.Namespace, count: int) -> tuple[str, Path, str]:
         if not out.suffix:
             out = out.with_suffix("." + fmt)
         refuse_directory("-o", out)
-        if args.sheet and fmt == "exr":
-            raise UsageError("--sheet writes an 8-bit labelled image: use .png or .tif")
-        return ("sheet" if args.sheet else "file"), out, fmt
+        if mode != "file" and fmt == "exr":
+            raise UsageError(f"--{mode} writes an 8-bit image: use .png or .tif")
+        return mode, out, fmt
     if suffix_fmt is not None:
         raise UsageError(f"{count} presets need -o DIR (one image each), --sheet or --together, not the file {out}")
     return "dir", output_directory(out), args.format or "png"

@@ -82,6 +82,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from leafview.core.colour import srgb_to_linear
 from leafview.core.params import LeafParams, Material, Shape, Transform
 from leafview.deform.surface import normals
 from leafview.errors import ParamError
@@ -371,7 +372,7 @@ def _join_cost(union: FitResult, *pieces: tuple[FitResult, int]) -> float:
 
 def _material(views: Sequence[View], r: Refined) -> Material:
     srgb = _median_colour(views, r) / 255.0
-    lin = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    lin = srgb_to_linear(srgb)
     f = np.clip(lin, 0.0, 1.0)
     b = np.clip(lin * 1.6 + 0.02, 0.0, 1.0)
     return Material(front=(float(f[0]), float(f[1]), float(f[2])), back=(float(b[0]), float(b[1]), float(b[2])))

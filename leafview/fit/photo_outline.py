@@ -43,6 +43,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 from skimage.filters import threshold_otsu
 
+from leafview.core.colour import srgb_to_linear
 from leafview.errors import ParamError
 from leafview.fit.photo_io import Photo, as_photo, read_photo
 from leafview.fit.photo_shape import Shape, leaf_shape, split_shares
@@ -97,7 +98,7 @@ class LeafOutline:
 
 # -- colour ------------------------------------------------------------------------------------------
 _LUT = np.linspace(0.0, 1.0, 4096, dtype=np.float64)
-_LINEAR = np.where(_LUT <= 0.04045, _LUT / 12.92, ((_LUT + 0.055) / 1.055) ** 2.4).astype(np.float32)
+_LINEAR = srgb_to_linear(_LUT).astype(np.float32)   # a look-up table: the photo's pixels decoded fast
 
 
 def _lab_f(t: NDArray[np.float32]) -> NDArray[np.float32]:

@@ -42,6 +42,7 @@ import numpy as np
 import OpenImageIO as oiio
 from numpy.typing import ArrayLike, NDArray
 
+from leafview.core.colour import linear_to_srgb, srgb_to_linear  # re-exported: the lookup's twins
 from leafview.core.params import LeafParams
 from leafview.core.texture import texture_st
 from leafview.errors import GpuLimitError, ParamError
@@ -69,19 +70,6 @@ class TextureUnreadable(Exception):
 
 
 # -- numpy twins -------------------------------------------------------------------------------------
-def srgb_to_linear(c: ArrayLike) -> NDArray[np.float64]:
-    """The sRGB decoding (IEC 61966-2-1) of values in [0, 1]: ``srgb_to_linear`` of
-    ``shaders/leaf_texture.glsl``."""
-    x = np.asarray(c, np.float64)
-    return np.where(x < 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
-
-
-def linear_to_srgb(c: ArrayLike) -> NDArray[np.float64]:
-    """The sRGB encoding of linear values (clamped to [0, 1]), as ``shaders/color.glsl``."""
-    x = np.clip(np.asarray(c, np.float64), 0.0, 1.0)
-    return np.where(x < 0.0031308, 12.92 * x, 1.055 * x ** (1.0 / 2.4) - 0.055)
-
-
 def sample_layer(layer: NDArray[np.uint8], s: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
     """GL's linear filtering of one RGBA8 layer (h, w, 4) at image coordinates (s, t), level 0,
     clamped to the edge: (..., 4) in [0, 1] (rgb still sRGB-encoded). Texel (i, j) (column, row)
