@@ -14,7 +14,7 @@ import pytest
 from leafview.cli import main
 from leafview.core import compact as C
 from leafview.core.io import load_leaves, save_leaves
-from leafview.core.params import Bending, Jitter, LeafParams, ParamError, Ripple, Transform
+from leafview.core.params import Bending, Jitter, LeafParams, ParamError, Ripple, Transform, Venation
 from leafview.resources import builtin_presets
 from tests.conftest import random_params
 
@@ -81,7 +81,10 @@ def test_defaults_are_left_out_and_presets_are_small():
     sizes = {k: len(C.dumps(v)) for k, v in _presets().items()}
     full = {k: len(json.dumps(v.to_dict(), separators=(",", ":"))) for k, v in _presets().items()}
     assert 100 <= sizes["ovate"] <= 200
-    assert float(np.median(list(sizes.values()))) <= 200, sizes
+    # every preset has a [venation] table (leafview.core.venation): 25-110 bytes of the compact form
+    veinless = {k: len(C.dumps(v.replace(venation=Venation()))) for k, v in _presets().items()}
+    assert float(np.median(list(veinless.values()))) <= 200, veinless
+    assert all(25 <= sizes[k] - veinless[k] <= 110 for k in sizes), (sizes, veinless)
     assert all(sizes[k] <= 0.6 * full[k] for k in sizes), (sizes, full)
 
 

@@ -128,8 +128,12 @@ class ParamPanel:
         label = self.label(spec.label, path)
         kind = spec.kind
         vector = _numbers(value)
-        new: bool | int | float | list[float]
-        if kind == "bool" or isinstance(value, bool):
+        new: bool | int | float | str | list[float]
+        if kind == "choice" and spec.choices:
+            current = spec.choices.index(value) if value in spec.choices else 0
+            changed, index = imgui.combo(label, current, list(spec.choices))
+            new = spec.choices[index]
+        elif kind == "bool" or isinstance(value, bool):
             changed, new = imgui.checkbox(label, bool(value))
         elif kind == "int" or (isinstance(value, int) and kind != "float"):
             changed, new = imgui.slider_int(label, int(value), int(lo), int(hi))

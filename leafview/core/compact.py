@@ -12,9 +12,9 @@ A compact leaf document (``*.leaf.json``)::
   21 numbers for the paper's quartic (Chaurasia & Beardsley 2017, eqs 3-4), 6 + 6N for an extended silhouette of N
   rows with tilts.
 * ``half`` (-1 or 1) appears only for a one-sided leaf (:attr:`Shape.half`).
-* ``jitter``, ``material``, ``transform``, ``ripple`` and ``bending`` hold only the fields that
-  differ from the defaults, with the same names and units as the full form; a group with no
-  such field is left out.
+* ``jitter``, ``material``, ``transform``, ``ripple``, ``bending`` and ``venation`` hold only
+  the fields that differ from the defaults, with the same names and units as the full form; a
+  group with no such field is left out (``venation.edits``, when present, is the whole list).
 
 Numbers are written in the shortest decimal that reads back to the same float64
 (``repr``), with a trailing ``.0`` dropped, so ``loads(dumps(x)) == x`` holds bit for bit.
@@ -45,13 +45,14 @@ from leafview.core.params import (
     parse_params,
     split_omega,
 )
+from leafview.core.venation import Venation, venation_dict
 from leafview.inputs import parse_json
 
 __all__ = ["COMPACT_VERSION", "OPTIONAL_GROUPS", "compact_dict", "dumps", "dumps_leaves", "is_compact",
            "loads", "omega_path", "parse_compact", "parse_leaves", "round_params"]
 
 COMPACT_VERSION = 1
-OPTIONAL_GROUPS = ("jitter", "material", "transform", "ripple", "bending")
+OPTIONAL_GROUPS = ("jitter", "material", "transform", "ripple", "bending", "venation")
 _LEAF_KEYS = ("name", "omega", "half", *OPTIONAL_GROUPS, "texture")
 
 
@@ -106,6 +107,7 @@ def compact_dict(params: LeafParams, *, digits: int | None = None, version: bool
         raise ParamError("digits", f"must be a whole number in 1..17, got {digits!r}")
     full = params.to_dict()
     default = LeafParams().to_dict()
+    default["venation"] = venation_dict(Venation(), keep_empty_edits=True)
     out: dict[str, Any] = {"leafview": COMPACT_VERSION} if version else {}
     if params.name:
         out["name"] = params.name
@@ -113,7 +115,7 @@ def compact_dict(params: LeafParams, *, digits: int | None = None, version: bool
     if params.shape.half:
         out["half"] = int(params.shape.half)
     for group in OPTIONAL_GROUPS:
-        kept = {k: _map_floats(v, digits) for k, v in full[group].items() if v != default[group][k]}
+        kept = {k: _map_floats(v, digits) for k, v in full.get(group, {}).items() if v != default[group][k]}
         if kept:
             out[group] = kept
     if params.texture is not None:

@@ -35,8 +35,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.bezier import derivative_points, evaluate_curve
 from leafview.core.display import png_of
+from leafview.core.fieldspec import FieldSpec, check_choice, check_range, number, spec_field
 from leafview.core.limits import MAX_SILHOUETTE_ROWS, check_name
 from leafview.core.texture import LeafTexture, parse_texture
+from leafview.core.venation import VeinEdit, Venation, parse_edits, venation_dict
 from leafview.errors import ParamError
 
 __all__ = [
@@ -51,6 +53,8 @@ __all__ = [
     "Transform",
     "Ripple",
     "Bending",
+    "Venation",
+    "VeinEdit",
     "LeafParams",
     "field_specs",
     "transform_matrices",
@@ -78,24 +82,11 @@ MIN_AXIS_TANGENT = 1e-6     # |A'(v̄_i)| in the leaf plane, per unit of v, at e
 Vec3 = tuple[float, float, float]
 
 
-@dataclass(frozen=True)
-class FieldSpec:
-    """UI and validation metadata of one parameter (used by the viewer panel and the checks)."""
-
-    label: str
-    group: str
-    soft_range: tuple[float, float]
-    step: float
-    hard_range: tuple[float | None, float | None] = (None, None)
-    kind: str = "float"  # float | int | bool | color | vec3 | pair | rows | per_row
-    positive: bool = False  # strictly greater than zero
-
-
-def _spec(label: str, group: str, lo: float, hi: float, step: float, *,
-          hard: tuple[float | None, float | None] = (None, None),
-          kind: str = "float", positive: bool = False, default: Any) -> Any:
-    spec = FieldSpec(label, group, (lo, hi), step, hard, kind, positive)
-    return field(default=default, metadata={"spec": spec})
+# FieldSpec (the metadata of one field) and the shared checks live in leafview.core.fieldspec, so
+# that groups defined in their own modules (leafview.core.venation) can use them too
+_spec = spec_field
+_number = number
+_check_range = check_range
 
 
 @dataclass(frozen=True)
@@ -292,6 +283,7 @@ class LeafParams:
     transform: Transform = field(default_factory=Transform)
     ripple: Ripple = field(default_factory=Ripple)
     bending: Bending = field(default_factory=Bending)
+    venation: Venation = field(default_factory=Venation)   # leafview.core.venation; off by default
     name: str = ""
     texture: LeafTexture | None = None   # front/back images addressed by (u, v) (leafview.core.texture)
 
@@ -323,6 +315,10 @@ class LeafParams:
             out["name"] = self.name
         for group in _GROUPS:
             obj = getattr(self, group)
+            if group == "venation":   # written only when set, so older files read and write back unchanged
+                if obj != Venation():
+                    out[group] = venation_dict(obj, keep_empty_edits=True)
+                continue
             out[group] = {f.name: _plain(getattr(obj, f.name)) for f in fields(obj)}
         if self.texture is not None:
             out["texture"] = self.texture.to_dict()
@@ -429,7 +425,7 @@ def field_specs() -> dict[str, FieldSpec]:
 # ---------------------------------------------------------------------------------------------
 # validation
 _GROUPS: dict[str, type] = {"shape": Shape, "jitter": Jitter, "material": Material, "transform": Transform,
-                             "ripple": Ripple, "bending": Bending}
+                             "ripple": Ripple, "bending": Bending, "venation": Venation}
 _TOP_KEYS = {"schema", "name", "texture", *_GROUPS}
 
 
@@ -437,17 +433,6 @@ def _plain(value: Any) -> Any:
     if isinstance(value, tuple):
         return [_plain(v) for v in value]
     return value
-
-
-def _number(value: Any, path: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ParamError(path, f"expected a number, got {type(value).__name__} {value!r}")
-    x = float(value)
-    if math.isnan(x):
-        raise ParamError(path, "is NaN; every parameter must be a finite number")
-    if math.isinf(x):
-        raise ParamError(path, f"is {'+' if x > 0 else '-'}Inf; every parameter must be a finite number")
-    return x
 
 
 def _vector(value: Any, n: int, path: str) -> tuple[float, ...]:
@@ -460,17 +445,11 @@ def _vector(value: Any, n: int, path: str) -> tuple[float, ...]:
     return tuple(_number(v, f"{path}[{i}]") for i, v in enumerate(value))
 
 
-def _check_range(x: float, spec: FieldSpec, path: str) -> None:
-    if spec.positive and not x > 0.0:
-        raise ParamError(path, f"{x!r} must be greater than 0")
-    lo, hi = spec.hard_range
-    if lo is not None and x < lo:
-        raise ParamError(path, f"{x!r} is below the minimum {lo}")
-    if hi is not None and x > hi:
-        raise ParamError(path, f"{x!r} is above the maximum {hi}")
-
-
 def _parse_field(value: Any, spec: FieldSpec, path: str, rows: int = 3) -> Any:
+    if spec.kind == "choice":
+        return check_choice(value, spec, path)
+    if spec.kind == "edits":
+        return parse_edits(value, path)
     if spec.kind == "bool":
         if not isinstance(value, bool):
             raise ParamError(path, f"expected true or false, got {type(value).__name__} {value!r}")

@@ -34,6 +34,7 @@ from leafview.core import params as P
 from leafview.core.compact import COMPACT_VERSION, OPTIONAL_GROUPS
 from leafview.core.limits import MAX_NAME_CHARS
 from leafview.core.texture import MAX_TEXTURE_PATH
+from leafview.core.venation import MAX_EDITS, VeinEdit, Venation, edit_specs, venation_dict
 
 __all__ = ["SCHEMA_ID", "DIALECT", "compact_schema", "compact_leaf_schema", "doc_line", "leaf_schema"]
 
@@ -100,7 +101,33 @@ def _field(spec: P.FieldSpec) -> dict[str, Any]:
         return _array(row, 3, _max_rows())
     if kind == "per_row":
         return _array(_number(spec), 3, _max_rows())
+    if kind == "choice":
+        return {"type": "string", "enum": list(spec.choices)}
+    if kind == "edits":
+        return _edits_schema()
     raise ValueError(f"leafview.core.schema does not know the field kind {kind!r}: extend _field()")
+
+
+def _edits_schema() -> dict[str, Any]:
+    """``venation.edits``: a list of vein edits (:class:`~leafview.core.venation.VeinEdit`), each
+    (vein, side) at most once (which the loader checks; the schema cannot)."""
+    props: dict[str, Any] = {}
+    for name, spec in edit_specs().items():
+        props[name] = {"title": spec.label, **_field(spec)}
+    props["side"]["enum"] = [-1, 1]
+    for name in ("angle", "bulge"):
+        props[name]["default"] = 0.0
+    item = {"type": "object", "description": doc_line(VeinEdit), "properties": props,
+            "required": ["vein", "side"], "additionalProperties": False}
+    return {"type": "array", "items": item, "maxItems": MAX_EDITS}
+
+
+def _default_document() -> dict[str, Any]:
+    """The default leaf as a document with every group written out (the venation group, which
+    a default leaf leaves out of its file, with an empty ``edits`` list)."""
+    doc = P.LeafParams().to_dict()
+    doc["venation"] = venation_dict(Venation(), keep_empty_edits=True)
+    return doc
 
 
 def _required(doc: dict[str, Any], path: tuple[str, ...]) -> bool:
@@ -138,7 +165,7 @@ def _texture_schema() -> dict[str, Any]:
 def leaf_schema() -> dict[str, Any]:
     """The JSON Schema (draft 2020-12) of a leaf parameter document."""
     specs = P.field_specs()
-    default = P.LeafParams().to_dict()
+    default = _default_document()
     props: dict[str, Any] = {
         "schema": {"const": P.SCHEMA_VERSION, "description": "file format version"},
         "name": _name_schema("the leaf's name (the file name when absent)"),

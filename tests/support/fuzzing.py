@@ -325,6 +325,13 @@ def _value(draw: Any, spec: Any, edge: bool) -> Any:
         hi = hard_hi if hard_hi is not None else hi
     if spec.kind == "bool":
         return draw(st.booleans())
+    if spec.kind == "choice":
+        return draw(st.sampled_from(spec.choices))
+    if spec.kind == "edits":   # venation.edits: a few vein edits with their fields in range
+        return draw(st.lists(st.fixed_dictionaries({
+            "vein": st.integers(0, 12), "side": st.sampled_from([-1, 1]),
+            "angle": st.floats(-30.0, 30.0), "bulge": st.floats(-0.05, 0.05)}),
+            max_size=3, unique_by=lambda e: (e["vein"], e["side"])))
     if spec.kind == "int":
         return draw(st.integers(int(math.ceil(lo)), int(math.floor(hi))))
     number = st.floats(lo, hi, allow_nan=False, allow_infinity=False,
