@@ -2,7 +2,11 @@
 
 The model (``LeafParams``, ``evaluate``, ``tessellate``) is pure numpy and loads with the package.
 The other public modules load on first use, so ``import leafview`` stays light: ``landmarks``,
-``shapes``, ``beam`` and ``edits`` (numpy/scipy), ``gpu`` and ``render`` (OpenGL).
+``shapes``, ``beam``, ``venation`` and ``edits`` (numpy/scipy), ``gpu`` and ``render`` (OpenGL).
+
+``evaluate``, ``normals``, ``partials`` and ``tessellate`` give the leaf as the shader draws it: a leaf
+whose venation is on carries the shape its veins give it (Hong 2005, ch. 7; the grid of
+:func:`leafview.venation.vein_grid`), which loads the venation code (scipy) on first use.
 """
 
 from __future__ import annotations
@@ -15,13 +19,14 @@ from numpy.typing import NDArray
 from leafview._version import __version__
 from leafview.core import FieldSpec, Jitter, LeafParams, Material, ParamError, Shape, Transform, field_specs
 from leafview.core.display import register_png_renderer
+from leafview.deform import surface as _surface
 from leafview.deform.fbm import check_signal_args, fbm_signal
-from leafview.deform.surface import Mesh, evaluate, normals, partials, tessellate
+from leafview.deform.surface import Mesh
 from leafview.errors import LeafviewError
 
 __all__ = ["LeafParams", "Shape", "Jitter", "Material", "Transform", "ParamError", "LeafviewError", "FieldSpec",
            "field_specs", "evaluate", "normals", "partials", "tessellate", "Mesh", "render", "gpu",
-           "edits", "beam", "landmarks", "shapes", "fbm_noise", "__version__"]
+           "edits", "beam", "landmarks", "shapes", "venation", "fbm_noise", "__version__"]
 
 # public modules loaded on first attribute access: name -> module
 _LAZY_MODULES = {
@@ -30,6 +35,7 @@ _LAZY_MODULES = {
     "beam": "leafview.beam",
     "landmarks": "leafview.landmarks",
     "shapes": "leafview.shapes",
+    "venation": "leafview.venation",
 }
 
 
@@ -64,3 +70,31 @@ def fbm_noise(n: int, beta: float, seed: int, backend: str = "cpu") -> NDArray[A
         result: NDArray[Any] = gpu.gpu_fbm_noise(n, beta, seed)
         return result
     raise ValueError(f"backend must be 'cpu' or 'gpu', got {backend!r}")
+
+
+def _vein_grid(params: LeafParams) -> NDArray[Any] | None:
+    """The vein-shape grid the shader reads for ``params`` (None without venation)."""
+    if not params.venation.enabled:
+        return None
+    grid: NDArray[Any] | None = importlib.import_module("leafview.venation").shape_grid(params)
+    return grid
+
+
+def evaluate(params: LeafParams, u: Any, v: Any) -> NDArray[Any]:
+    """Leaf-space points at (u, v) (:func:`leafview.deform.surface.evaluate`), veins' shape included."""
+    return _surface.evaluate(params, u, v, vein_grid=_vein_grid(params))
+
+
+def normals(params: LeafParams, u: Any, v: Any) -> NDArray[Any]:
+    """Unit normals at (u, v) (:func:`leafview.deform.surface.normals`), veins' shape included."""
+    return _surface.normals(params, u, v, vein_grid=_vein_grid(params))
+
+
+def partials(params: LeafParams, u: Any, v: Any) -> _surface.Partials:
+    """Position and derivatives at (u, v) (:func:`leafview.deform.surface.partials`), veins' shape included."""
+    return _surface.partials(params, u, v, vein_grid=_vein_grid(params))
+
+
+def tessellate(params: LeafParams, nu: int = _surface.DEFAULT_GRID[0], nv: int = _surface.DEFAULT_GRID[1]) -> Mesh:
+    """The leaf as a grid mesh (:func:`leafview.deform.surface.tessellate`), veins' shape included."""
+    return _surface.tessellate(params, nu, nv, vein_grid=_vein_grid(params))

@@ -31,6 +31,9 @@ LeafVertex leaf_vertex;   // this vertex's leaf, made of the attributes first th
 #define LEAF_ROW leaf
 #endif
 #include "leaf_eval.glsl"
+#ifndef LEAF_NO_VEINS
+#include "leaf_vein_lod.glsl"
+#endif
 
 // jitter tables, one row per seed (moderngl has no 1D textures; a 2D texture of 1D rows)
 layout(binding = JITTER_UNIT) uniform sampler2D jitter_table;
@@ -45,6 +48,10 @@ out vec2 v_uv;
 flat out vec4 v_front;      // rgb, translucency
 flat out vec3 v_back;
 flat out ivec2 v_layers;    // front, back image texture layer, -1 untextured (leaf.frag)
+#ifndef LEAF_NO_VEINS
+flat out vec4 v_vein;       // vein layer (-1: no veins), world scale, detail, contrast (leaf_vein_lod.glsl)
+flat out vec2 v_vein_style; // relief, major veins' width
+#endif
 #ifdef LEAF_AOV
 // label pass (leafview/gpu/aov.py): the scene's index of the leaf, for the instance output
 flat out uint v_leaf;
@@ -85,4 +92,7 @@ void main() {
     v_leaf = LEAF_INDEX;
 #endif
     gl_Position = frame.proj * frame.view * world;
+#ifndef LEAF_NO_VEINS
+    vein_vertex(leaf_vein_layer(LEAF), length(LEAF.model[0].xyz), gl_Position.w, v_vein, v_vein_style);
+#endif
 }

@@ -3,6 +3,9 @@
 // BakedLeaves). Positions and normals arrive precomputed in world space, one vertex record per
 // leaf vertex; it writes the same outputs as leaf.vert so leaf.frag shades both identically.
 #include "generated/frame_block.glsl"
+#ifndef LEAF_NO_VEINS
+#include "leaf_vein_lod.glsl"
+#endif
 
 in vec3 in_position;   // world space
 in vec3 in_normal;     // world space, unit, upper (front) side
@@ -13,6 +16,9 @@ in vec4 in_back;       // rgb, unused
 in vec2 in_layers;     // front, back image texture layer + 1 as LEAF_SLOTS stores them (0: untextured;
                        // an unbound attribute reads 0)
 #endif
+#ifndef LEAF_NO_VEINS
+in vec2 in_veins;      // vein layer + 1 (0: no veins; an unbound attribute reads 0), world scale
+#endif
 
 out vec3 v_world;
 out vec3 v_normal;
@@ -20,6 +26,10 @@ out vec2 v_uv;
 flat out vec4 v_front;
 flat out vec3 v_back;
 flat out ivec2 v_layers;
+#ifndef LEAF_NO_VEINS
+flat out vec4 v_vein;
+flat out vec2 v_vein_style;
+#endif
 
 void main() {
     v_world = in_position;
@@ -33,4 +43,7 @@ void main() {
     v_layers = ivec2(in_layers) - 1;
 #endif
     gl_Position = frame.proj * frame.view * vec4(in_position, 1.0);
+#ifndef LEAF_NO_VEINS
+    vein_vertex(int(in_veins.x) - 1, in_veins.y, gl_Position.w, v_vein, v_vein_style);
+#endif
 }

@@ -2,8 +2,9 @@
 // plus the jittered silhouette of sec. 6.
 // Shader permutations: LEAF_NO_JITTER, LEAF_NO_RIPPLE, LEAF_NO_BEND and LEAF_NO_EXTENDED (and
 // LEAF_NO_HALF in leaf.vert) compile the feature out when no leaf of a draw uses it
-// (leafview.gpu.layout.feature_defines); the results are identical for the leaves they are used
-// with.
+// (leafview.gpu.layout.feature_defines), and LEAF_NO_VEINS the vein-shape grid when no leaf has a
+// vein layer (leafview.gpu.layout.vein_defines); the results are identical for the leaves they
+// are used with.
 // The including shader defines LEAF as the record every vertex reads (the Leaf uniform block, a
 // LeafData row, or the LeafVertex made of instanced vertex attributes: only the LeafVertex members
 // and the branch code are read through it). The members of the optional branches (ripples,
@@ -25,6 +26,12 @@
 // the ripple signals (fBm, one row of RIPPLE_SAMPLES per (seed, beta)), written by fbm.comp
 layout(std430, binding = SIGNALS_BINDING) readonly buffer Signals { float signals[]; };
 
+#ifndef LEAF_NO_VEINS
+// the vein-shape grids (leafview/botany/vein_shape.py, vein_grid), one layer per (shape, venation):
+// xyz the blade's displacement by its edited veins, w the ripple coordinate
+layout(binding = VEIN_GRID_UNIT) uniform sampler2DArray leaf_vein_grid;
+#endif
+
 struct LeafEval {
     vec3 L;    // position (leaf space)
     vec3 Lu;   // dL/du
@@ -41,27 +48,74 @@ vec2 tip_taper(float v) {
     return vec2(1.0 - w3 * w, -8.0 * w3);
 }
 
-// Rippled margin (Geng, Hu & Zhang 2014, eq. 5): D = tau(v) r(v) c(|u|) z, r = P [lambda + (1 - lambda) N(k veins v
+// Rippled margin (Geng, Hu & Zhang 2014, eq. 5): D = tau(v) r(w) c(|u|) z, r = P [lambda + (1 - lambda) N(k veins w
 // + theta)], c(s) = s^2 (3 - s) / 2 the small-deflection shape of a tip-loaded cantilever (the
-// secondary vein from the midrib). numpy reference: leafview/deform/surface.py, _add_ripple.
-void add_ripple(float sigma, float s, float v, inout LeafEval e) {
+// secondary vein from the midrib). wc = (w, dw/du, dw/dv, d2w/dudv): the ripple coordinate, v
+// itself without veins, else the vein grid's w (constant along each secondary vein, so that the
+// veins are the beams; the d2L/dudv term tau r''(w) w_u w_v c is left out: zero where d2L/dudv is
+// used, at the pinched ends). numpy reference: leafview/deform/surface.py, _add_ripple.
+void add_ripple(float sigma, float s, float v, vec4 wc, inout LeafEval e) {
     vec4 rp = sigma > 0.0 ? ROW_ripple_l : ROW_ripple_r;  // P, lambda, k, theta
     int base = ROW_leaf_signal_row * RIPPLE_SAMPLES;
     float veins = ROW_leaf_veins;
-    float t = rp.z * veins * v + rp.w;
+    float t = rp.z * veins * wc.x + rp.w;
     vec2 n;
     FBM_SAMPLE_PERIODIC(signals, base, RIPPLE_SAMPLES, t, n);
     float r = rp.x * (rp.y + (1.0 - rp.y) * n.x);
-    float dr = rp.x * (1.0 - rp.y) * n.y * rp.z * veins;
+    float dr = rp.x * (1.0 - rp.y) * n.y * rp.z * veins;  // dr/dw
     vec2 tau = tip_taper(v);
     float c = 0.5 * s * s * (3.0 - s);
     float dc = 3.0 * s - 1.5 * s * s;
-    float g = tau.y * r + tau.x * dr;
+    float ru = dr * wc.y;
+    float g = tau.y * r + tau.x * (dr * wc.z);
     e.L.z += tau.x * r * c;
-    e.Lu.z += sigma * tau.x * r * dc;
+    e.Lu.z += sigma * tau.x * r * dc + tau.x * ru * c;
     e.Lv.z += c * g;
-    e.Luv.z += sigma * dc * g;
+    e.Luv.z += sigma * dc * g + c * (tau.y * ru + tau.x * dr * wc.w);
 }
+
+#ifndef LEAF_NO_VEINS
+// row j of grid layer `layer` at column position i0 + fx (value r, d/dx rx; wx = 0 where x is
+// clamped); rows -1 and nv are the pinned rows past the texel centres: (0, 0, 0, 1) at the apex,
+// 0 at the base
+void vein_grid_row(int layer, int j, int nv, int i0, float fx, float wx, out vec4 r, out vec4 rx) {
+    if (j < 0 || j >= nv) {
+        r = j < 0 ? vec4(0.0, 0.0, 0.0, 1.0) : vec4(0.0);
+        rx = vec4(0.0);
+        return;
+    }
+    vec4 a = texelFetch(leaf_vein_grid, ivec3(i0, j, layer), 0);
+    vec4 b = texelFetch(leaf_vein_grid, ivec3(i0 + 1, j, layer), 0);
+    r = a + (b - a) * fx;
+    rx = (b - a) * wx;
+}
+
+// The vein-shape grid at uv and its partials (g, dg/du, dg/dv, d2g/dudv): bilinear between texel
+// centres at (s, t) = ((1 - u) / 2, 1 - v) (leafview/core/texture.py), clamped across u, pinned
+// along v (the rows above). numpy reference: leafview/deform/surface.py, sample_vein_grid.
+void vein_grid_eval(int layer, vec2 uv, out vec4 g, out vec4 gu, out vec4 gv, out vec4 guv) {
+    ivec3 size = textureSize(leaf_vein_grid, 0);
+    int nu = size.x, nv = size.y;
+    float x = 0.5 * (1.0 - uv.x) * float(nu) - 0.5;
+    float wx = (x > 0.0 && x < float(nu - 1)) ? 1.0 : 0.0;
+    x = clamp(x, 0.0, float(nu - 1));
+    int i0 = min(int(floor(x)), nu - 2);
+    float fx = x - float(i0);
+    float y = (1.0 - uv.y) * float(nv) - 0.5;
+    int j = clamp(int(floor(y)), -1, nv - 1);
+    float y0 = max(float(j), -0.5);
+    float y1 = min(float(j + 1), float(nv) - 0.5);
+    vec4 r0, r0x, r1, r1x;
+    vein_grid_row(layer, j, nv, i0, fx, wx, r0, r0x);
+    vein_grid_row(layer, j + 1, nv, i0, fx, wx, r1, r1x);
+    float h = 1.0 / (y1 - y0);
+    float fy = (y - y0) * h;
+    g = r0 + (r1 - r0) * fy;
+    gu = (r0x + (r1x - r0x) * fy) * (-0.5 * float(nu));
+    gv = (r1 - r0) * (h * -float(nv));
+    guv = (r1x - r0x) * (h * (0.5 * float(nu) * float(nv)));
+}
+#endif
 
 mat3 cross_matrix(vec3 a) {
     return mat3(0.0, a.z, -a.y, -a.z, 0.0, a.x, a.y, -a.x, 0.0);  // columns
@@ -270,9 +324,24 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
         e.Luv += (amp * 2.0 * s) * dg;
     }
 #endif
+    // vein-driven shape (Hong 2005, ch. 7.2): the blade displaced by its edited veins, and the
+    // ripple coordinate w (v without veins)
+    vec4 wc = vec4(v, 0.0, 1.0, 0.0);
+#ifndef LEAF_NO_VEINS
+    int vein_layer = leaf_vein_layer(LEAF);
+    if (vein_layer >= 0) {
+        vec4 g, gu, gv, guv;
+        vein_grid_eval(vein_layer, uv, g, gu, gv, guv);
+        e.L += g.xyz;
+        e.Lu += gu.xyz;
+        e.Lv += gv.xyz;
+        e.Luv += guv.xyz;
+        wc = vec4(g.w, gu.w, gv.w, guv.w);
+    }
+#endif
 #ifndef LEAF_NO_RIPPLE
     if (leaf_has_ripple(LEAF)) {
-        add_ripple(sigma, s, v, e);
+        add_ripple(sigma, s, v, wc, e);
     }
 #endif
 #ifndef LEAF_NO_BEND

@@ -262,6 +262,8 @@ def built_programs(gl, presets, monkeypatch):
         with LeafRenderer(ctx, resources=res) as r:
             r.render_many(leaves, (32, 32), "three-quarter")
             r.capture(leaves[2], [0.5], [0.5])
+            r.set_leaf(presets["beech"])   # draw's close-up veins: both vein tube programs
+            assert r.vein_tubes.program is not None and r.vein_tubes.frame_program is not None
         records, tables = pack_leaves(leaves)
         with InstancedLeaves(ctx, records, (5, 9), jitter_tables=tables, ripple_signals=ripple_keys(leaves),
                              resources=res) as inst, BakedLeaves.from_instanced(inst, resources=res):

@@ -46,10 +46,11 @@ def leaf_set(presets) -> list[LeafParams]:
 # -- packing ---------------------------------------------------------------------------------------
 def test_species_rows_equal_the_per_leaf_packer(leaf_set):
     from leafview.gpu.scene import species_tables
+    from leafview.gpu.vein_draw import fresh_layers
 
     scene = scene_from_leaves(leaf_set)
     recs, table, keys = species_tables(scene)
-    ref, ref_table = pack_leaves(scene.species)
+    ref, ref_table = pack_leaves(scene.species, vein_layers=fresh_layers(scene.species))
     assert recs.tobytes() == ref.tobytes()
     assert np.array_equal(table, ref_table) and len(table) > 1
     assert keys == ripple_keys(scene.species) and len(keys) > 1
@@ -59,8 +60,9 @@ def test_species_rows_equal_the_per_leaf_packer(leaf_set):
 def test_rows_of_a_varied_scene_in_chunks_and_into_a_reused_array(presets):
     """pack_scene over several of its chunks, fresh or into a larger array, equals the per-leaf
     packer of each leaf's own varied shape."""
-    from leafview.gpu.layout import LEAF_BLOCK, pack_leaf
+    from leafview.gpu.layout import LEAF_BLOCK, pack_leaf, write_vein_layers
     from leafview.gpu.scene import _PACK_CHUNK, pack_scene, species_tables
+    from leafview.gpu.vein_draw import fresh_layers
 
     scene = build_scene(SceneSpec(species=(presets["ovate"], presets["holly"], presets["lanceolate"]),
                                   leaves=2 * _PACK_CHUNK + 300, seed=9, plants=5))
@@ -75,6 +77,7 @@ def test_rows_of_a_varied_scene_in_chunks_and_into_a_reused_array(presets):
     for i in (start, start + _PACK_CHUNK - 1, start + _PACK_CHUNK, stop - 1):
         one = pack_leaf(scene.leaf(i))
         one["model"] = scene.matrices[i].T
+        write_vein_layers(one, fresh_layers(scene.species)[scene.species_id[i]])   # the species' vein field layer
         for name in fields:
             assert np.allclose(rows[i - start][name], one[name], rtol=2e-6, atol=1e-7), (i, name)
     assert len(set(rows["xs"][:, 0].tolist())) > 100       # leaves differ

@@ -77,14 +77,18 @@ def test_syntax_error_names_file_line(tmp_path):
 
 # -- per-leaf rows (numpy) ----------------------------------------------------------------------
 def test_vectorised_rows_match_per_leaf_packing(small):
+    from leafview.gpu.layout import write_vein_layers
     from leafview.gpu.scene import pack_scene
+    from leafview.gpu.vein_draw import fresh_layers
 
     rows = pack_scene(small)
     assert rows.dtype == LEAF_BLOCK.dtype and rows.shape == (len(small),)
     params_fields = [name for name, _, _ in LEAF_BLOCK.members if name not in LEAF_BLOCK.derived]
+    layers = fresh_layers(small.species)   # each species' vein field layer (leafview.gpu.vein_draw)
     for i in (0, 1, 57, 199, len(small) - 1):
         one = pack_leaf(small.leaf(i))
         one["model"] = small.matrices[i].T
+        write_vein_layers(one, layers[small.species_id[i]])   # in the matrix's last row, as the species'
         for name in params_fields:
             if name in ("bend", "bend_axis"):
                 continue  # the species' droop (see leafview.scene.spec)

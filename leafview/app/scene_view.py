@@ -6,7 +6,7 @@ shows what the culling pass drew at each level of detail and toggles culling and
 the tests drive it headless with injected imgui events.
 
 Mouse: left drag orbits, shift+left or middle drag pans, the wheel dollies. Keys: C culling,
-L level of detail, F frame the scene, Esc or Q quit.
+L level of detail, V veins, F frame the scene, Esc or Q quit.
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ class _State:
 class SceneView:
     """Scene + panel for one GL context (creates and releases its own imgui context)."""
 
-    def __init__(self, ctx: moderngl.Context, scene: Scene) -> None:
+    def __init__(self, ctx: moderngl.Context, scene: Scene, *, veins: bool = True) -> None:
         self.ctx, self.scene = ctx, scene
         self.imgui_ctx: imgui.internal.Context | None = imgui.create_context()   # None once released
         imgui.get_io().set_ini_filename(None)
@@ -71,7 +71,8 @@ class SceneView:
         self.renderer: SceneRenderer | None = None
         try:
             self.gui = ImguiRenderer(ctx)
-            self.renderer = SceneRenderer(ctx, scene)
+            self.renderer = SceneRenderer(ctx, scene)   # the vein fields, shown or not by the checkbox
+            self.renderer.show_veins = veins
         except BaseException:
             self.release()
             raise
@@ -140,6 +141,8 @@ class SceneView:
             self.settings = replace(self.settings, cull=not self.settings.cull)
         if pressed(imgui.Key.l):
             self.settings = replace(self.settings, lod=not self.settings.lod)
+        if pressed(imgui.Key.v) and self.renderer is not None:
+            self.renderer.show_veins = not self.renderer.show_veins
         if pressed(imgui.Key.f):
             self.camera.frame(self._corners(), scene_w / h)
         if pressed(imgui.Key.escape) or pressed(imgui.Key.q):
@@ -174,6 +177,7 @@ class SceneView:
         s = self.settings
         changed, cull = imgui.checkbox("culling (C)", s.cull)
         changed2, lod = imgui.checkbox("level of detail (L)", s.lod)
+        _, self.renderer.show_veins = imgui.checkbox("veins (V)", self.renderer.show_veins)
         _, err = imgui.slider_float("max outline error (px)", s.max_error_px, 0.1, 8.0)
         _, minpx = imgui.slider_float("smallest leaf (px)", s.min_pixels, 0.0, 8.0)
         self.settings = replace(s, cull=cull, lod=lod, max_error_px=float(err), min_pixels=float(minpx))
@@ -219,8 +223,10 @@ class SceneView:
 
 
 def view_scene(scene: Scene, size: tuple[int, int] = (1280, 800), frames: int | None = None,
-               screenshot: str | Path | None = None) -> int:
-    """Open ``scene`` in a window (blocks until closed); returns the exit code."""
+               screenshot: str | Path | None = None, *, veins: bool = True) -> int:
+    """Open ``scene`` in a window (blocks until closed), its veins shown or not (``veins``, the
+    panel's checkbox); returns the exit code."""
 
-    with ViewerWindow(None, size, title="leafview scene", make_view=lambda ctx: SceneView(ctx, scene)) as win:
+    with ViewerWindow(None, size, title="leafview scene",
+                      make_view=lambda ctx: SceneView(ctx, scene, veins=veins)) as win:
         return win.run(frames=frames, screenshot=screenshot)

@@ -37,6 +37,7 @@ class ViewSettings:
     grid: tuple[int, int] = DEFAULT_GRID  # (u, v) samples of the drawn surface
     light_azimuth: float = 37.9     # key light, degrees (0 = from -y, towards +x positive)
     light_elevation: float = 55.2   # degrees above the leaf plane
+    show_veins: bool = True         # leaves with venation show their veins (--veins on|off)
 
     def light_direction(self) -> tuple[float, float, float]:
         """Unit vector towards the key light (world space, z up)."""

@@ -238,6 +238,7 @@ class Viewer:
         flags = (imgui.WindowFlags_.no_move | imgui.WindowFlags_.no_resize | imgui.WindowFlags_.no_collapse
                  | imgui.WindowFlags_.no_saved_settings)
         imgui.begin(f"leafview: {self.state.title}###panel", None, flags)
+        view = self.state.view
         imgui.push_item_width(-165)
         self.files.draw()
         imgui.separator()
@@ -248,10 +249,10 @@ class Viewer:
         for draw in self.custom_panels:
             draw(self.state)
         self.panel.draw_view()
+        _, view.show_veins = imgui.checkbox("veins##view", view.show_veins)
         imgui.pop_item_width()
         imgui.end()
         self.files.draw_confirm()
-        view = self.state.view
         nu, nv = view.grid
         fps = f"{self.fps:5.1f} fps ({1000 / self.fps:.1f} ms)" if self.fps else "  –  fps"
         status = f"{fps}   {2 * (nu - 1) * (nv - 1):,} triangles   {self.gl_renderer}   H: keys"
@@ -264,12 +265,14 @@ class Viewer:
 
     def _upload(self) -> None:
         """Upload the leaf if it changed since the last frame (uniform block only); rebuild the
-        overlay's vertices if the leaf or the ground placement changed."""
+        overlay's vertices if the leaf or the ground placement changed. Toggling the veins checkbox
+        uploads the leaf again, with or without its vein layer."""
         state = self.state
         assert self.renderer is not None and self.overlay is not None
         self.last_upload_bytes = 0
-        if state.revision != self._uploaded:
+        if state.revision != self._uploaded or self.renderer.veins != state.view.show_veins:
             before = self.renderer.uploads
+            self.renderer.veins = state.view.show_veins   # the veins checkbox (--veins on|off)
             self.renderer.set_leaf(state.params)
             self.last_upload_bytes = self.renderer.uploads - before
             self._uploaded = state.revision

@@ -26,10 +26,12 @@ from leafview.scene.camera import VIEWS, check_leaf_framable
 
 __all__ = ["EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_INTERRUPTED", "VIEWS", "count", "int_in_range", "int_pair",
            "pixels", "image_size", "output_path", "window_size", "grid", "builtin_names", "expand_presets",
-           "preset_file", "load_leaf_files", "load_framable_leaves", "refuse_directory", "output_directory", "output_names", "report", "progress_bar"]
+           "preset_file", "load_leaf_files", "load_framable_leaves", "refuse_directory", "output_directory", "output_names", "report", "progress_bar",
+           "VEINS", "add_veins_argument", "veins_off"]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 EXIT_INTERRUPTED = 130   # Ctrl-C, as a shell reports SIGINT
+VEINS = ("on", "off")
 
 
 # -- argument types -----------------------------------------------------------------------------
@@ -192,3 +194,15 @@ def progress_bar(iterable: Iterable[Any] | None = None, *, quiet: bool, **option
     """A tqdm progress bar on stderr: hidden with ``quiet``, and (tqdm's rule) when stderr is not
     a terminal. ``options`` go to tqdm (``total``, ``unit``, ``desc``, ``leave``, ...)."""
     return tqdm(iterable, disable=True if quiet else None, file=sys.stderr, **options)
+
+
+def add_veins_argument(parser: argparse.ArgumentParser) -> None:
+    """``--veins on|off`` (``render``, ``scene``, ``view``; argparse refuses other values, exit 2)."""
+    parser.add_argument("--veins", choices=VEINS, default="on",
+                        help="on (default): leaves whose venation is enabled show their veins; off: no leaf "
+                             "does (drawn as if its venation were disabled)")
+
+
+def veins_off(args: argparse.Namespace) -> bool:
+    """Whether ``--veins off`` was given."""
+    return getattr(args, "veins", "on") == "off"

@@ -1,4 +1,4 @@
-"""``leafview bench [core|scene|export|shapes|dataset|capture|fit|peers|all] [--json] [--quick]``: the benchmark
+"""``leafview bench [core|scene|export|shapes|dataset|capture|fit|veins|peers|all] [--json] [--quick]``: the benchmark
 tables of :mod:`leafview.bench`, measured in this process (also run by ``python bench/run_bench.py``);
 ``peers`` draws the same leaves with PyVista and pygfx as well (optional: ``leafview[peers]``), each
 in a worker process of its own, and is left out of ``all``.
@@ -30,6 +30,7 @@ SUITES: dict[str, str] = {
     "dataset": "leafview.bench.dataset", # dataset images per second, 1 worker against 2 (local engine)
     "capture": "leafview.bench.capture", # fitting point clouds and capturing a plant from RGB-D views
     "fit": "leafview.bench.fit_photo",   # leaves fitted to synthetic photos: IoU, base/apex, photos per second
+    "veins": "leafview.bench.veins",     # the vein field of a new species, GPU against its numpy twin
     "peers": "leafview.bench.peers",     # the same leaves drawn by PyVista/VTK and pygfx (leafview[peers])
 }
 # what "all" runs: every table but the side-by-side with other renderers (optional, minutes long)

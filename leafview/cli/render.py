@@ -22,9 +22,11 @@ from typing import Any
 
 from leafview._version import __version__
 from leafview.atomic import outputs
+from leafview.botany.vein_shading import without_veins
 from leafview.cli.args import (
     EXIT_OK,
     VIEWS,
+    add_veins_argument,
     count,
     expand_presets,
     grid,
@@ -37,6 +39,7 @@ from leafview.cli.args import (
     progress_bar,
     refuse_directory,
     report,
+    veins_off,
 )
 from leafview.core.params import LeafParams
 from leafview.errors import UsageError
@@ -190,6 +193,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "in a .leaves.json; such a pair alone is drawn together without it)")
     parser.add_argument("--grid", type=grid, default=None, metavar="NUxNV",
                         help=f"(u, v) samples (default 33x65; with --views {VIEW_GRID[0]}x{VIEW_GRID[1]})")
+    add_veins_argument(parser)
     add_views_arguments(parser)
     parser.add_argument("--seed", dest="views_seed", type=_seed, default=None, metavar="N",
                         help="with --views: seed of the depth noise and holes (default 0)")
@@ -239,6 +243,8 @@ def _run_views(args: argparse.Namespace) -> int:
         raise UsageError(f"--views draws one leaf or one leaf set: give one PRESET, not {len(args.presets)}")
     path = preset_file(args.presets[0])
     leaves = load_framable_leaves([path])
+    if veins_off(args):
+        leaves = without_veins(leaves)
     scene = scene_from_leaves(leaves, name=path.name)
     write_views(args, scene, size=(args.size, args.size), seed=args.views_seed or 0, grid=args.grid or VIEW_GRID)
     return EXIT_OK
@@ -253,6 +259,8 @@ def run(args: argparse.Namespace) -> int:
     # validate everything before writing anything: finite and within what float32 can frame, or exit 2
     # naming the file, the leaf and the field
     leaves = load_framable_leaves(expand_presets(args.presets))
+    if veins_off(args):
+        leaves = without_veins(leaves)
     args.together = args.together or (len(args.presets) == 1 and not args.sheet and is_half_pair(leaves))
     mode, out, fmt = _plan(args, len(leaves))
     names = [leaf.name for leaf in leaves]

@@ -16,6 +16,7 @@ none of the other outputs. The noise is seeded with the scene's ``--seed``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import time
 from pathlib import Path
@@ -23,7 +24,18 @@ from typing import Any
 
 from leafview.app.scene_view import view_scene
 from leafview.atomic import outputs
-from leafview.cli.args import EXIT_OK, builtin_names, count, image_size, output_path, progress_bar, refuse_directory
+from leafview.botany.vein_shading import without_veins
+from leafview.cli.args import (
+    EXIT_OK,
+    add_veins_argument,
+    builtin_names,
+    count,
+    image_size,
+    output_path,
+    progress_bar,
+    refuse_directory,
+    veins_off,
+)
 from leafview.cli.render import add_views_arguments, check_views_arguments, write_views
 from leafview.core.compact import is_compact
 from leafview.core.io import leaves_from_document, read_document, save_leaves
@@ -104,6 +116,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="write the scene file (.toml or .json), or every placed leaf as a leaf set (.leaves.json)")
     p.add_argument("--export", type=output_path, metavar="FILE",
                    help="bake the scene to a mesh file (.glb, .gltf, .usda, .usdc)")
+    add_veins_argument(p)
     p.add_argument("--view", action="store_true", help="open the scene in a window (orbit, culling/LOD panel)")
     p.add_argument("--frames", type=_frames, metavar="N", help="with --view: draw N frames, then close (scripted runs)")
     p.add_argument("--screenshot", type=output_path, metavar="IMAGE",
@@ -208,25 +221,32 @@ def run(args: argparse.Namespace) -> int:
         spec = spec_from_args(args)   # every input is validated before anything is written
         scene = build_scene(spec)
     t_build = time.perf_counter() - t0
+    if veins_off(args):   # drawn, exported and viewed without veins; --save keeps the recipe as it is
+        drawn = dataclasses.replace(scene, species=tuple(without_veins(scene.species)))
+        scene, saved = drawn, scene
+    else:
+        saved = scene
     if args.views is not None:
         write_views(args, scene, size=args.size, seed=spec.seed)
         return EXIT_OK
     wrote: list[str] = []
     with outputs():   # --save, --export and -o are written together, or none of them
-        _write_outputs(args, scene, spec, leaves is not None, t_build, wrote)
+        _write_outputs(args, scene, saved, spec, leaves is not None, t_build, wrote)
     for line in wrote:
         say(line)
     if args.view:
-        return view_scene(scene, size=args.size, frames=args.frames, screenshot=args.screenshot)
+        return view_scene(saved, size=args.size, frames=args.frames, screenshot=args.screenshot,
+                          veins=not veins_off(args))
     return EXIT_OK
 
 
-def _write_outputs(args: argparse.Namespace, scene: Scene, spec: SceneSpec, explicit: bool, t_build: float,
-                   wrote: list[str]) -> None:
-    """--save, --export and -o (staged in the caller's transaction); ``wrote`` gets a line each."""
+def _write_outputs(args: argparse.Namespace, scene: Scene, saved: Scene, spec: SceneSpec, explicit: bool,
+                   t_build: float, wrote: list[str]) -> None:
+    """--save (``saved``: the scene as built), --export and -o (``scene``: as drawn) staged in the
+    caller's transaction; ``wrote`` gets a line each."""
     say = wrote.append
     if args.save:
-        _save(scene, spec, args.save, explicit)
+        _save(saved, spec, args.save, explicit)
         say(f"wrote {args.save}: {len(scene):,} leaves, {len(spec.species)} species, seed {spec.seed}")
     if args.export:
         # the grid the scene is drawn with up close, not the single-leaf default (33×65 would

@@ -12,7 +12,15 @@ import argparse
 from leafview.app.photo_reference import is_photo_path, open_photo
 from leafview.app.viewer import open_state
 from leafview.app.window import ViewerWindow
-from leafview.cli.args import int_in_range, output_path, preset_file, refuse_directory, window_size
+from leafview.cli.args import (
+    add_veins_argument,
+    int_in_range,
+    output_path,
+    preset_file,
+    refuse_directory,
+    veins_off,
+    window_size,
+)
 from leafview.core.params import LeafParams
 from leafview.errors import UsageError
 from leafview.export.images import format_of
@@ -42,6 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="after the last frame, write the whole window (scene and panel) as PNG/TIFF")
     parser.add_argument("--dev", action="store_true",
                         help="hot-reload shaders/ when the files change (errors shown, old shaders kept)")
+    add_veins_argument(parser)
     parser.add_argument("--samples", type=int, choices=(0, 2, 4, 8), default=None,
                         help="multisampling of the scene (default 4; 0 on software renderers such as llvmpipe)")
 
@@ -58,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
         refuse_directory("--screenshot", args.screenshot)
     params = LeafParams.load(path)  # ParamError → exit 2, naming the file and field
     state = open_state(params, path)
+    state.view.show_veins = not veins_off(args)   # the panel's veins checkbox
     if photo is not None and not open_photo(state, photo):
         raise UsageError(f"--photo: {state.error}")     # before any window opens: exit 2
     with ViewerWindow(state, args.size, dev=args.dev, samples=args.samples) as window:

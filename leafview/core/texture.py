@@ -33,7 +33,7 @@ from numpy.typing import ArrayLike, NDArray
 from leafview.errors import ParamError
 
 __all__ = ["LeafTexture", "TEXTURE_SUFFIXES", "MAX_TEXTURE_PATH", "parse_texture", "check_texture_path",
-           "texture_st", "uv_of_st", "with_folder"]
+           "texture_st", "uv_of_st", "with_folder", "bilinear"]
 
 TEXTURE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")
 MAX_TEXTURE_PATH = 255          # characters of a texture path as written in the leaf file
@@ -136,3 +136,23 @@ def uv_of_st(s: ArrayLike, t: ArrayLike) -> tuple[NDArray[np.float64], NDArray[n
     ss = np.asarray(s, np.float64)
     tt = np.asarray(t, np.float64)
     return 1.0 - 2.0 * ss, 1.0 - tt
+
+
+def bilinear(image: ArrayLike, s: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
+    """GL's linear filtering of ``image`` (h, w, C) at image coordinates (s, t), level 0, clamped to
+    the edge: texel (i, j) (column, row) is centred at ((i + 0.5) / w, (j + 0.5) / h), row 0 at
+    t = 0. The numpy twin of a ``texture()`` lookup (image textures, vein fields)."""
+    img = np.asarray(image, np.float64)
+    h, w = img.shape[:2]
+    x = np.asarray(s, np.float64) * w - 0.5
+    y = np.asarray(t, np.float64) * h - 0.5
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
+    i0 = np.clip(x0.astype(np.int64), 0, w - 1)
+    i1 = np.clip(x0.astype(np.int64) + 1, 0, w - 1)
+    j0 = np.clip(y0.astype(np.int64), 0, h - 1)
+    j1 = np.clip(y0.astype(np.int64) + 1, 0, h - 1)
+    top = img[j0, i0] * (1.0 - fx) + img[j0, i1] * fx
+    bottom = img[j1, i0] * (1.0 - fx) + img[j1, i1] * fx
+    out: NDArray[np.float64] = top * (1.0 - fy) + bottom * fy
+    return out

@@ -24,15 +24,17 @@ class Lighting:
 
 
 def fill_frame(record: np.ndarray, camera: Camera, *, srgb: bool, flat: bool = False,
-               lighting: type[Lighting] = Lighting) -> None:
-    """Fill a FRAME_BLOCK record: camera matrices (column-major), lights and output flags."""
+               lighting: type[Lighting] = Lighting, size: tuple[int, int] | None = None) -> None:
+    """Fill a FRAME_BLOCK record: camera matrices (column-major), lights and output flags; ``size``
+    (width, height) of the image, whose height sets the veins' level of detail (``flags.z``; None:
+    unknown, veins always at full detail)."""
     record["view"] = camera.view.T
     record["proj"] = camera.proj.T
     record["eye"] = camera.eye
     record["key"] = lighting.key
     record["fill"] = lighting.fill
     record["ambient"][:3] = lighting.ambient
-    record["flags"] = (int(srgb), int(flat), 0, 0)
+    record["flags"] = (int(srgb), int(flat), 0 if size is None else int(size[1]), 0)
 
 
 class FrameUniforms:
@@ -40,13 +42,28 @@ class FrameUniforms:
     at ``FRAME_BINDING``."""
 
     def __init__(self, ctx: moderngl.Context) -> None:
+        self.ctx = ctx
         self.record = FRAME_BLOCK.zeros()
         self.buffer = ctx.buffer(reserve=FRAME_BLOCK.nbytes)
+        self._sized = False
 
     def set_camera(self, camera: Camera, *, srgb: bool = True, flat: bool = False,
-                   lighting: type[Lighting] = Lighting) -> None:
-        fill_frame(self.record, camera, srgb=srgb, flat=flat, lighting=lighting)
+                   lighting: type[Lighting] = Lighting, size: tuple[int, int] | None = None) -> None:
+        """Write the block; without ``size``, :meth:`fit_viewport` takes the image height (the
+        veins' level of detail) from the viewport of each draw."""
+        fill_frame(self.record, camera, srgb=srgb, flat=flat, lighting=lighting, size=size)
+        self._sized = size is not None
         self.buffer.write(self.record.tobytes())
+
+    def fit_viewport(self) -> None:
+        """Unless :meth:`set_camera` was given the image size, make the block's image height that
+        of the current viewport (a draw into a window or target set up by the caller)."""
+        if self._sized:
+            return
+        height = int(self.ctx.viewport[3])
+        if int(self.record["flags"][2]) != height:
+            self.record["flags"][2] = height
+            self.buffer.write(self.record.tobytes())
 
     def bind(self) -> None:
         self.buffer.bind_to_uniform_block(FRAME_BINDING)

@@ -13,7 +13,8 @@ ahead of time, either on the CPU with the numpy reference (:meth:`BakedLeaves.fr
 :func:`leafview.deform.surface.tessellate`) or captured from the instanced vertex shader
 (:meth:`BakedLeaves.from_instanced`, fast for 10⁴ leaves): one vertex buffer for all leaves
 (40 bytes a vertex), one index buffer, one draw call, ``leaf_baked.vert`` + the same ``leaf.frag``,
-in the leaves' plain colours (image textures: :class:`InstancedLeaves` with ``textures=``).
+in the leaves' plain colours (image textures and veins: :class:`InstancedLeaves` with
+``textures=`` and ``veins=``).
 
 Both are used by :mod:`leafview.bench.core` (parameters vs baked meshes) and by the tests that
 check they draw the same picture. Neither changes the framebuffer binding: bind a target, call
@@ -38,17 +39,20 @@ from leafview.gpu.frame import FrameUniforms, Lighting
 from leafview.gpu.layout import (
     LEAF_BLOCK,
     LEAVES_BINDING,
+    NO_VEIN_DEFINES,
     PLAIN_DEFINES,
     feature_defines,
     needs_row_texture,
     pack_leaves,
     texture_defines,
+    vein_defines,
 )
 from leafview.gpu.limits import capture_bytes, check_buffer, check_grid, ensure_alive
 from leafview.gpu.owner import GLObjects
 from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, Grid, JitterTable, RowTexture, record_vertex_array
 from leafview.gpu.targets import OffscreenTarget, read_rgba
 from leafview.gpu.textures import LeafTextures
+from leafview.gpu.vein_draw import VeinDraw
 from leafview.scene.camera import Camera
 
 __all__ = ["LEAVES_BINDING", "InstancedLeaves", "BakedLeaves", "pack_leaves", "bake_leaves",
@@ -156,14 +160,15 @@ class _Batch:
         self.release()
 
     def set_camera(self, camera: Camera, *, srgb: bool = True, flat: bool = False,
-                   lighting: type[Lighting] = Lighting) -> None:
-        self.frame.set_camera(camera, srgb=srgb, flat=flat, lighting=lighting)
+                   lighting: type[Lighting] = Lighting, size: tuple[int, int] | None = None) -> None:
+        self.frame.set_camera(camera, srgb=srgb, flat=flat, lighting=lighting, size=size)
 
     @property
     def triangles_per_leaf(self) -> int:
         return 2 * (self.nu - 1) * (self.nv - 1)
 
     def _bind(self) -> None:
+        self.frame.fit_viewport()   # the veins' level of detail, unless set_camera had the size
         self.frame.bind()
 
 
@@ -190,12 +195,17 @@ class InstancedLeaves(_Batch):
         The image textures of the records' texture layers (the caller's: ``keys =
         textures.update(params)``, then ``pack_leaves(params, textures=keys)``); ``None``: every
         leaf in its plain colours.
+    veins:
+        The vein textures of the records' vein layers (the caller's: ``layers =
+        veins.update(params)``, then ``pack_leaves(params, vein_layers=layers)``); ``None``: no
+        leaf shows veins.
     """
 
     def __init__(self, ctx: moderngl.Context, records: Any, grid: tuple[int, int] = (9, 15), *,
                  jitter_tables: ArrayLike | None = None,
                  ripple_signals: Sequence[tuple[int, float]] = (),
-                 resources: GpuResources | None = None, textures: LeafTextures | None = None) -> None:
+                 resources: GpuResources | None = None, textures: LeafTextures | None = None,
+                 veins: VeinDraw | None = None) -> None:
         recs = self.records = _as_records(records)
         self.count = int(recs.shape[0])
         ensure_alive(ctx, "uploading instanced leaves")
@@ -211,9 +221,11 @@ class InstancedLeaves(_Batch):
         try:
             self.nu, self.nv = grid
             self.textures = textures
+            self.veins = veins if veins is not None and veins.active else None
             plain = textures is None or textures.texture is None
             self.program = self.resources.leaf_program(
-                {"LEAF_INSTANCED": 1, **feature_defines(recs), **(PLAIN_DEFINES if plain else texture_defines(recs))},
+                {"LEAF_INSTANCED": 1, **feature_defines(recs), **(PLAIN_DEFINES if plain else texture_defines(recs)),
+                 **(NO_VEIN_DEFINES if self.veins is None else vein_defines(recs))},
                 varyings=WORLD_VARYINGS)
             self.ssbo = self._own(ctx.buffer(recs.tobytes() if self.count else bytes(LEAF_BLOCK.nbytes)))
             self.resources.prepare.run(self.ssbo, self.count)  # derived per-leaf fields, one dispatch
@@ -240,6 +252,8 @@ class InstancedLeaves(_Batch):
         self.ripples.bind()
         if self.textures is not None:
             self.textures.use()
+        if self.veins is not None:
+            self.veins.use()
 
     def draw(self) -> None:
         """All leaves, one instanced draw, into the bound framebuffer (depth test on)."""
@@ -301,7 +315,8 @@ class BakedLeaves(_Batch):
             tris = grid_indices(self.nu, self.nv)
             idx = (tris[None] + (np.arange(n, dtype=np.uint32) * nverts)[:, None, None])
             self.index_count = int(idx.size)
-            self.program = self.resources.programs.program("leaf_baked.vert", "leaf.frag", defines=PLAIN_DEFINES)
+            self.program = self.resources.programs.program("leaf_baked.vert", "leaf.frag",
+                                                           defines={**PLAIN_DEFINES, **NO_VEIN_DEFINES})
             self.vbo = self._own(ctx.buffer(verts.tobytes() if n else bytes(vdt.itemsize)))
             self.ibo = self._own(ctx.buffer(idx.astype(np.uint32).tobytes() if n else bytes(12)))
             self.vao = self._own(ctx.vertex_array(self.program, [(self.vbo, _BAKED_FORMAT, *_BAKED_ATTRS)],

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from leafview.botany.vein_shading import glsl_constants as vein_shading_glsl
 from leafview.core.blade import APEX, BASE, JITTER_TABLE_SIZE, jitter_table
 from leafview.core.params import MAX_SILHOUETTE_ROWS, LeafParams
 from leafview.core.texture import LeafTexture
@@ -47,10 +48,13 @@ __all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "SPECIES_CULL_BLOCK", "DRAW_COM
            "Binding", "BINDINGS", "binding_defines", "bindings_glsl",
            "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "SIGNALS_BINDING", "SPECIES_OF_BINDING",
            "SPECIES_BINDING", "COMMANDS_BINDING", "VISIBLE_BINDING", "FBM_JOBS_BINDING", "READBACK_BINDING",
-           "VERTICES_BINDING", "JITTER_UNIT", "ATLAS_UNIT", "ROWS_UNIT", "TEXTURE_UNIT",
+           "VERTICES_BINDING", "JITTER_UNIT", "ATLAS_UNIT", "ROWS_UNIT", "TEXTURE_UNIT", "VEIN_FIELD_UNIT",
+           "VEIN_GRID_UNIT", "VEIN_STYLE_UNIT", "VEIN_SEGMENTS_BINDING", "VEIN_TEXELS_BINDING",
+           "VEIN_TILES_BINDING", "VEIN_FIELD_SAMPLER", "VEIN_GRID_SAMPLER",
            "Slot", "LEAF_SLOTS", "BRANCH_RIPPLE", "BRANCH_BEND", "BRANCH_ROWS", "branch_code", "without_derived", "PAIR_MEMBERS", "read_slot", "write_slot", "read_pair", "accessors_glsl",
            "struct_from_dtype", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources",
            "texture_keys", "texture_layers", "write_texture_layers", "texture_defines", "PLAIN_DEFINES",
+           "write_vein_layers", "vein_defines", "NO_VEIN_DEFINES", "VEIN_SKIN_DEFINES",
            "AovOutput", "AOV_OUTPUTS", "LEAF_OFFSET_UNIFORM", "aov_outputs_glsl",
            "LEAF_VERTEX_BLOCK", "LeafAttribute", "LEAF_ATTRIBUTES", "MAX_VERTEX_ATTRIBUTES", "attribute_format",
            "attributes_glsl", "vertex_records", "ROW_TEXELS", "ROWS_PER_LINE", "MAX_TEXTURE_SIZE", "row_texture_size",
@@ -166,7 +170,8 @@ FRAME_BLOCK = Block(
         ("key", "vec4", 1),        # key light direction (towards the light), intensity
         ("fill", "vec4", 1),       # fill light direction, intensity
         ("ambient", "vec4", 1),    # ambient rgb, unused
-        ("flags", "ivec4", 1),     # x: encode sRGB, y: lighting off (flat colour)
+        ("flags", "ivec4", 1),     # x: encode sRGB, y: lighting off (flat colour), z: image height in
+                                   # pixels (veins' level of detail; 0 unknown: full detail)
     ),
     "camera, lights and output flags of one frame",
 )
@@ -202,10 +207,20 @@ VISIBLE_BINDING = 7      # storage Visible: visible leaf indices, one list per l
 FBM_JOBS_BINDING = 8     # storage Jobs: the FbmJob rows of one synthesis dispatch
 READBACK_BINDING = 9     # storage: output of readback probes (tests compare GLSL with numpy)
 VERTICES_BINDING = 10    # storage Vertices: LeafVertex records of a scene's visible leaves
+VEIN_SEGMENTS_BINDING = 11  # storage VeinSegments: half-width tables and vein segments (vein_field.comp)
+VEIN_TEXELS_BINDING = 12    # storage VeinTexels: the vein field texels vein_field.comp writes
+VEIN_TILES_BINDING = 13     # storage VeinTiles: the per-tile segment lists of vein_field.comp
 JITTER_UNIT = 0          # sampler jitter_table: jitter rows, one per seed
 ATLAS_UNIT = 1           # sampler atlas: Dear ImGui's font atlas or user image
 ROWS_UNIT = 2            # sampler leaf_rows: LeafData rows as texels (the optional branches' members)
 TEXTURE_UNIT = 3         # sampler leaf_textures: the leaves' image textures, one array layer per file
+VEIN_FIELD_UNIT = 4      # sampler leaf_vein_field: the vein fields (distance, order, width), one layer per key
+VEIN_GRID_UNIT = 5       # sampler leaf_vein_grid: the vein-shape grids (displacement, ripple coordinate)
+VEIN_STYLE_UNIT = 6      # sampler leaf_vein_style: venation contrast and relief, one texel per vein layer
+VEIN_FIELD_SAMPLER = "leaf_vein_field"
+"""GLSL name of the ``sampler2DArray`` at :data:`VEIN_FIELD_UNIT` (``shaders/leaf_veins.glsl``)."""
+VEIN_GRID_SAMPLER = "leaf_vein_grid"
+"""GLSL name of the ``sampler2DArray`` at :data:`VEIN_GRID_UNIT` (``shaders/leaf_eval.glsl``)."""
 
 
 @dataclass(frozen=True)
@@ -232,10 +247,17 @@ BINDINGS: tuple[Binding, ...] = (
     Binding("FBM_JOBS_BINDING", FBM_JOBS_BINDING, "storage", "Jobs", "fBm synthesis jobs"),
     Binding("READBACK_BINDING", READBACK_BINDING, "storage", "", "readback probes (tests)"),
     Binding("VERTICES_BINDING", VERTICES_BINDING, "storage", "Vertices", "LeafVertex records of visible leaves"),
+    Binding("VEIN_SEGMENTS_BINDING", VEIN_SEGMENTS_BINDING, "storage", "VeinSegments",
+            "vein segments of a field dispatch (leafview/gpu/vein_field.py)"),
+    Binding("VEIN_TEXELS_BINDING", VEIN_TEXELS_BINDING, "storage", "VeinTexels", "vein field texels written"),
+    Binding("VEIN_TILES_BINDING", VEIN_TILES_BINDING, "storage", "VeinTiles", "per-tile vein segment lists"),
     Binding("JITTER_UNIT", JITTER_UNIT, "sampler", "jitter_table", "jitter rows"),
     Binding("ATLAS_UNIT", ATLAS_UNIT, "sampler", "atlas", "imgui texture"),
     Binding("ROWS_UNIT", ROWS_UNIT, "sampler", "leaf_rows", "LeafData rows as texels"),
     Binding("TEXTURE_UNIT", TEXTURE_UNIT, "sampler", "leaf_textures", "leaf image textures (leafview/gpu/textures.py)"),
+    Binding("VEIN_FIELD_UNIT", VEIN_FIELD_UNIT, "sampler", VEIN_FIELD_SAMPLER, "vein fields (leafview/gpu/vein_field.py)"),
+    Binding("VEIN_GRID_UNIT", VEIN_GRID_UNIT, "sampler", VEIN_GRID_SAMPLER, "vein-shape grids (leafview/gpu/vein_field.py)"),
+    Binding("VEIN_STYLE_UNIT", VEIN_STYLE_UNIT, "sampler", "leaf_vein_style", "contrast, relief per vein layer"),
 )
 
 
@@ -328,6 +350,9 @@ LEAF_SLOTS: tuple[Slot, ...] = (
     Slot("leaf_front_layer", "model", 3, "layer", "front texture layer, -1 untextured", column=0),
     Slot("leaf_back_layer", "model", 3, "layer", "back texture layer (the front's without a back image)",
          column=1),
+    # and the third: the leaf's layer of the vein field and vein-shape grid arrays
+    # (leafview/gpu/vein_field.py), -1 without veins, stored plus one like the texture layers
+    Slot("leaf_vein_layer", "model", 3, "layer", "vein field / grid layer, -1 without veins", column=2),
     # spare components of the members read as vertex attributes (LEAF_VERTEX_BLOCK), so that the
     # vertex stage learns which branches a leaf takes, and a scene's vertex record its row,
     # without reading the storage buffer:
@@ -434,11 +459,12 @@ def accessors_glsl() -> str:
 
 
 def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: int = 0,
-              layers: tuple[int, int] = (-1, -1)) -> np.ndarray:
+              layers: tuple[int, int] = (-1, -1), vein_layer: int = -1) -> np.ndarray:
     """Fill a LEAF_BLOCK record from ``params`` (float32, std140 = std430); ``ripple_row`` is the
     row of the ripple signal buffer holding this leaf's ``(seed, beta)`` signal, ``layers`` the
     layers of its front and back images in the draw's array texture (-1: untextured; see
-    :func:`texture_layers`). Packed fields are written through :func:`write_slot` (the GLSL side
+    :func:`texture_layers`), ``vein_layer`` its layer of the draw's vein field and grid arrays
+    (-1: no veins; ``VeinFields.layers`` of leafview.gpu.vein_field). Packed fields are written through :func:`write_slot` (the GLSL side
     reads them with the accessors)."""
     rec = LEAF_BLOCK.zeros() if out is None else out
     s, j, m = params.shape, params.jitter, params.material
@@ -473,6 +499,7 @@ def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: 
     write_slot(rec, "leaf_half", float(params.shape.half))
     rec["model"] = params.transform.matrix().T  # column-major for GLSL
     write_texture_layers(rec, layers)           # the matrix's last row (after the matrix itself)
+    write_vein_layers(rec, vein_layer)
     rip, bend = params.ripple, params.bending
     write_slot(rec, "leaf_ripple_on", float(rip.enabled))
     write_slot(rec, "leaf_bend_on", float(bend.active))
@@ -509,6 +536,22 @@ def feature_defines(records: np.ndarray) -> dict[str, int]:
     if not read_slot(recs, "leaf_bend_on").any():
         defines["LEAF_NO_BEND"] = 1
     return defines
+
+
+def vein_defines(records: np.ndarray) -> dict[str, int]:
+    """``LEAF_NO_VEINS`` when no record of a draw has a vein layer: ``leaf.frag`` then reads no vein
+    field (and ``leaf_eval.glsl`` no vein grid), so a draw without veins pays nothing for them."""
+    recs = np.atleast_1d(records)
+    return {} if (read_slot(recs, "leaf_vein_layer") >= 0).any() else dict(NO_VEIN_DEFINES)
+
+
+NO_VEIN_DEFINES: Mapping[str, int] = MappingProxyType({"LEAF_NO_VEINS": 1})
+"""The define of a draw with no vein field bound (stems, baked leaves, ``--veins off``)."""
+
+VEIN_SKIN_DEFINES: Mapping[str, int] = MappingProxyType({"LEAF_VEIN_SKIN": 1})
+"""The define of a draw of veined leaves too far for their veins (a scene's coarser levels of
+detail): their skin and sides, no vein field read. llvmpipe runs both sides of a branch, so a
+per-triangle level of detail in ``leaf.frag`` alone would still cost every fragment the field."""
 
 
 def texture_defines(records: np.ndarray) -> dict[str, int]:
@@ -573,6 +616,12 @@ def write_texture_layers(records: np.ndarray, layers: ArrayLike) -> None:
     write_slot(records, "leaf_back_layer", pairs[..., 1])
 
 
+def write_vein_layers(records: np.ndarray, layers: ArrayLike) -> None:
+    """Store vein ``layers`` (one int, or (N,) for N records; -1 no veins) in the records'
+    ``leaf_vein_layer`` slot."""
+    write_slot(records, "leaf_vein_layer", np.asarray(layers, np.int32))
+
+
 def ripple_keys(params: Iterable[LeafParams]) -> list[tuple[int, float]]:
     """The distinct ``(seed, beta)`` ripple signals of leaves with ripples on, in order of first
     use: row i of the signal buffer holds ``keys[i]`` (the rows :func:`pack_leaves` assigns)."""
@@ -583,12 +632,13 @@ def ripple_keys(params: Iterable[LeafParams]) -> list[tuple[int, float]]:
     return list(keys)
 
 
-def pack_leaves(params: Iterable[LeafParams], *, textures: Sequence[str] | None = None
-                ) -> tuple[NDArray[Any], NDArray[np.float32]]:
+def pack_leaves(params: Iterable[LeafParams], *, textures: Sequence[str] | None = None,
+                vein_layers: ArrayLike | None = None) -> tuple[NDArray[Any], NDArray[np.float32]]:
     """LEAF_BLOCK records (N,) for ``params`` and the jitter table rows they index: one row of
     :data:`JITTER_TABLE_SIZE` values per distinct seed among leaves with jitter on (at least one
     row). ``leaf_jitter_row`` of each record is its row; the texture layers are those of an array
-    texture holding ``textures`` (default :func:`texture_keys` of ``params``)."""
+    texture holding ``textures`` (default :func:`texture_keys` of ``params``), the vein layers
+    ``vein_layers`` ((N,) or one int; default -1, no veins: ``VeinFields.layers``)."""
     params = list(params)
     recs = np.zeros(len(params), dtype=LEAF_BLOCK.dtype)
     rows: dict[int, int] = {}
@@ -604,6 +654,8 @@ def pack_leaves(params: Iterable[LeafParams], *, textures: Sequence[str] | None 
                 row = rows[p.jitter.seed] = len(tables)
                 tables.append(jitter_table(p.jitter))
             write_slot(recs[i], "leaf_jitter_row", float(row))
+    if vein_layers is not None:
+        write_vein_layers(recs, np.broadcast_to(np.asarray(vein_layers, np.int32), (len(params),)))
     table = np.stack(tables) if tables else np.zeros((1, JITTER_TABLE_SIZE), np.float32)
     return recs, table.astype(np.float32)
 
@@ -846,6 +898,7 @@ def generated_sources() -> dict[str, str]:
                                         + struct_from_dtype("DrawCommand", DRAW_COMMAND_DTYPE)),
         "generated/fbm_job.glsl": struct_from_dtype("FbmJob", FBM_JOB_DTYPE),
         "generated/aov_outputs.glsl": aov_outputs_glsl(),
+        "generated/vein_shading.glsl": vein_shading_glsl(),
         "generated/aov_vertex.glsl": (f"// generated from leafview/gpu/layout.py: first leaf of the drawn batch\n"
                                       f"uniform uint {LEAF_OFFSET_UNIFORM};\n"),
     }

@@ -4,9 +4,17 @@ atlas, and the transform-feedback capture that tests and export read back.
 
 Programs, grids, render targets and the capture come from a :class:`~leafview.gpu.resources.
 GpuResources` set (shared with other renderers through ``resources=``, else owned); this
-renderer owns only its leaf and frame blocks, batch rows, jitter rows, ripple signals and image
-textures (:class:`~leafview.gpu.textures.LeafTextures`), and releases them in
-:meth:`LeafRenderer.release` (or a ``with`` block).
+renderer owns only its leaf and frame blocks, batch rows, jitter rows, ripple signals, image
+textures (:class:`~leafview.gpu.textures.LeafTextures`) and vein textures
+(:class:`~leafview.gpu.vein_draw.VeinDraw`, one for the single leaf and one for batches), and
+releases them in :meth:`LeafRenderer.release` (or a ``with`` block).
+
+Veins: a leaf whose venation is enabled is drawn with its vein field (``shaders/leaf_veins.glsl``)
+while :attr:`LeafRenderer.veins` is true (the default; ``--veins off`` and the viewer's checkbox
+set it false: no leaf shows veins, as if its venation were disabled). :meth:`LeafRenderer.draw` (the
+viewer's path) also draws the veins as geometry (:class:`~leafview.gpu.vein_tubes.VeinTubes`, Hong
+2005, ch. 6.1) wherever they are at least a pixel wide on screen; stills at thumbnail sizes have none
+that wide.
 """
 
 from __future__ import annotations
@@ -36,6 +44,7 @@ from leafview.gpu.layout import (
     ripple_keys,
     texture_defines,
     texture_layers,
+    vein_defines,
 )
 from leafview.gpu.limits import (
     MAX_RESOURCE_BYTES,
@@ -53,6 +62,8 @@ from leafview.gpu.prepare import LeafPrepare
 from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, JitterTable
 from leafview.gpu.targets import unpremultiply
 from leafview.gpu.textures import LeafTextures, check_textures
+from leafview.gpu.vein_draw import VeinDraw
+from leafview.gpu.vein_tubes import VeinTubes
 from leafview.scene.camera import VIEWS, Camera, frame_view
 
 __all__ = ["LeafRenderer", "DEFAULT_GRID", "BATCH", "Lighting", "fill_frame"]
@@ -61,7 +72,7 @@ BATCH = 64            # leaves per atlas in render_many
 _MAX_ATLAS = 4096     # atlas side limit in pixels (well inside GL_MAX_RENDERBUFFER_SIZE)
 
 # what a thumbnail captures of each vertex and then draws from: world position, world normal
-# (as leaf.vert computes them) and the drawn (u, v) that leaf.frag's midrib and textures read
+# (as leaf.vert computes them) and the drawn (u, v) that leaf.frag's midrib, textures and veins read
 DRAW_VARYINGS = (*WORLD_VARYINGS, "v_uv")
 DRAW_VERTEX_FORMAT = "3f 3f 2f"
 DRAW_VERTEX_BYTES = 32
@@ -103,6 +114,9 @@ class LeafRenderer:
             self.ripples = self._objects.own(self.resources.ripple_pass())
             self.jitter = self._objects.own(JitterTable(self.ctx))
             self.textures = self._objects.own(LeafTextures(self.ctx))
+            self.leaf_veins = self._objects.own(VeinDraw(self.ctx, self.resources.programs))    # set_leaf's leaf
+            self.batch_veins = self._objects.own(VeinDraw(self.ctx, self.resources.programs))   # render_many's chunks
+            self.vein_tubes = self._objects.own(VeinTubes(self.ctx, resources=self.resources))  # draw's close-ups
             self.leaf_ubo = self._objects.own(self.ctx.buffer(reserve=LEAF_BLOCK.nbytes))
             self.frame = self._objects.own(FrameUniforms(self.ctx))
             self._batch_leaf = self._objects.own(GrowingBuffer(self.ctx))
@@ -117,6 +131,7 @@ class LeafRenderer:
         self._row_align = max(16, int(self.ctx.info.get("GL_UNIFORM_BUFFER_OFFSET_ALIGNMENT", 256)),
                               int(self.ctx.info.get("GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT", 256)))
         self.uploads = 0  # bytes written to GPU buffers/textures by set_leaf (for edit-cost tests)
+        self.veins = True  # leaves whose venation is enabled show veins (False: none does)
 
     # -- lifetime -------------------------------------------------------------------------------
     def release(self) -> None:
@@ -161,7 +176,9 @@ class LeafRenderer:
             layers = (int(front), int(back))
         if params.ripple.enabled:  # re-synthesises only when seed or β changed
             self.ripples.update([(params.ripple.seed, params.ripple.beta)])
-        pack_leaf(params, self._leaf, layers=layers)
+        vein_layer = int(self.leaf_veins.update([params], enabled=self.veins)[0])   # rebuilt when the key changed
+        self.vein_tubes.update(params if self.veins else None)                      # rebuilt when the leaf changed
+        pack_leaf(params, self._leaf, layers=layers, vein_layer=vein_layer)
         self.leaf_ubo.write(self._leaf.tobytes())
         self.uploads += LEAF_BLOCK.nbytes
         self.prepare.run(self.leaf_ubo, 1)
@@ -169,13 +186,16 @@ class LeafRenderer:
             self.uploads += self.jitter.set_seed(params.jitter)
 
     def set_camera(self, camera: Camera, *, srgb: bool, flat: bool = False,
-                   lighting: type[Lighting] = Lighting) -> None:
-        self.frame.set_camera(camera, srgb=srgb, flat=flat, lighting=lighting)
+                   lighting: type[Lighting] = Lighting, size: tuple[int, int] | None = None) -> None:
+        """The camera of :meth:`draw`; ``size`` (width, height) of the image sets the veins' level
+        of detail (None: full detail)."""
+        self.frame.set_camera(camera, srgb=srgb, flat=flat, lighting=lighting, size=size)
 
     def _bind(self) -> None:
         self.leaf_ubo.bind_to_uniform_block(LEAF_BINDING)
         self.frame.bind()
         self._bind_tables()
+        self.leaf_veins.use()
 
     def _bind_tables(self) -> None:
         self.jitter.use()
@@ -196,11 +216,14 @@ class LeafRenderer:
         """Draw the leaf last given to :meth:`set_leaf` with the camera last given to
         :meth:`set_camera` into the currently bound framebuffer (interactive use: the viewer
         uploads only what an edit changed, then calls this every frame)."""
+        self.frame.fit_viewport()   # the veins' level of detail: this draw's image height
         self._bind()
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.wireframe = wireframe
         try:
             self.grid(*grid).render(moderngl.TRIANGLES)
+            if not wireframe:
+                self.vein_tubes.draw(self.frame)   # veins as geometry where they are wide enough on screen
         finally:
             self.ctx.wireframe = False
 
@@ -272,7 +295,8 @@ class LeafRenderer:
         program (the same ``leaf.frag``), one indirect draw a leaf; one readback."""
         n = len(leaves)
         files = self.textures.update(leaves)
-        records, tables = pack_leaves(leaves, textures=files)
+        vein_layers = self.batch_veins.update(leaves, enabled=self.veins)
+        records, tables = pack_leaves(leaves, textures=files, vein_layers=vein_layers)
         self.jitter.upload(tables)
         keys = ripple_keys(leaves)
         if keys:
@@ -281,11 +305,13 @@ class LeafRenderer:
         for i in range(n):  # rows sit at the uniform-offset alignment: one small dispatch each
             self.prepare.run(leaf_rows, 1, offset=i * leaf_stride)
         # the shader permutation without the features no leaf of this chunk uses
-        program = self.resources.leaf_program(feature_defines(records), varyings=DRAW_VARYINGS)
+        veins = vein_defines(records)
+        program = self.resources.leaf_program({**feature_defines(records), **veins}, varyings=DRAW_VARYINGS)
         geometry = self.resources.grid(*grid)
         nverts = geometry.vertices
         points = geometry.points(program)
         self._bind_tables()
+        self.batch_veins.use()
         self.frame.bind()   # the capture computes gl_Position too (discarded)
         with self.resources.capture.recording(n * nverts, DRAW_VERTEX_BYTES) as rec:
             # 1. the only vertex-shader pass over the leaves: capture, frame each camera on it
@@ -294,13 +320,13 @@ class LeafRenderer:
                 rec.add(points, nverts)
             frames = np.zeros(n, dtype=FRAME_BLOCK.dtype)
             if camera is not None:
-                fill_frame(frames[0], camera, srgb=not linear, flat=flat)
+                fill_frame(frames[0], camera, srgb=not linear, flat=flat, size=(w, h))
                 frames[1:] = frames[0]
             else:
                 world = rec.records()[:, :3].reshape(n, nverts, 3)
                 for i in range(n):
                     fill_frame(frames[i], frame_view(view, world[i].astype(np.float64), (w, h)),
-                               srgb=not linear, flat=flat)
+                               srgb=not linear, flat=flat, size=(w, h))
             frame_rows, frame_stride = self._write_records(self._batch_frame, frames)
             colours = self._batch_colour.write(_leaf_colours(records))
             commands = self._batch_commands.write(_draw_commands(n, geometry.triangles * 3, nverts))
@@ -313,13 +339,12 @@ class LeafRenderer:
             self.ctx.scissor = None
             target.clear(bg)
             self.ctx.enable_only(moderngl.DEPTH_TEST)
-            baked = self.resources.programs.program("leaf_baked.vert", "leaf.frag", defines=texture_defines(records))
-            layers = "in_layers" in baked
+            baked = self.resources.programs.program("leaf_baked.vert", "leaf.frag",
+                                                    defines={**texture_defines(records), **veins})
+            fmt, names = _colour_format(baked)
             vao = self.ctx.vertex_array(
                 baked,
-                [(rec.buffer, DRAW_VERTEX_FORMAT, "in_position", "in_normal", "in_uv"),
-                 (colours, "4f 4f 2f/i" if layers else "4f 4f 8x/i", "in_front", "in_back",
-                  *(("in_layers",) if layers else ()))],
+                [(rec.buffer, DRAW_VERTEX_FORMAT, "in_position", "in_normal", "in_uv"), (colours, fmt, *names)],
                 index_buffer=geometry.ibo, index_element_size=4)
             try:
                 for i in range(n):
@@ -376,11 +401,26 @@ class LeafRenderer:
             vbo.release()
 
 
+# the per-leaf attributes of the thumbnail draw (_leaf_colours): name, format, bytes
+_COLOUR_ATTRS = (("in_front", "4f", 16), ("in_back", "4f", 16), ("in_layers", "2f", 8), ("in_veins", "2f", 8))
+
+
 def _leaf_colours(records: NDArray[Any]) -> NDArray[np.float32]:
-    """Per-leaf attributes of the thumbnail draw: front (rgb, translucency) and back colours, and
-    the texture layers plus one (``in_layers`` of leaf_baked.vert; 0 untextured)."""
+    """Per-leaf attributes of the thumbnail draw: front (rgb, translucency) and back colours, the
+    texture layers plus one (``in_layers`` of leaf_baked.vert; 0 untextured) and the vein layer
+    plus one and the world scale (``in_veins``; 0 without veins)."""
     layers = np.stack([read_slot(records, "leaf_front_layer"), read_slot(records, "leaf_back_layer")], axis=1) + 1
-    return np.ascontiguousarray(np.concatenate([records["front"], records["back"], layers], axis=1), np.float32)
+    veins = np.stack([read_slot(records, "leaf_vein_layer") + 1,
+                      np.linalg.norm(records["model"][:, 0, :3], axis=1)], axis=1)
+    return np.ascontiguousarray(np.concatenate([records["front"], records["back"], layers, veins], axis=1),
+                                np.float32)
+
+
+def _colour_format(program: moderngl.Program) -> tuple[str, tuple[str, ...]]:
+    """moderngl format and names of the :func:`_leaf_colours` attributes ``program`` reads (the
+    others, compiled out of its variant, are skipped as padding)."""
+    parts = [f"{fmt}" if name in program else f"{size}x" for name, fmt, size in _COLOUR_ATTRS]
+    return " ".join(parts) + "/i", tuple(name for name, _, _ in _COLOUR_ATTRS if name in program)
 
 
 def _draw_commands(n: int, indices: int, vertices: int) -> NDArray[Any]:

@@ -17,7 +17,9 @@ Per frame, for each batch of leaves:
 
 Textured species (:mod:`leafview.gpu.textures`) share one array texture, a layer per image
 file, bound for the whole scene: each record carries its layers, so they draw in the same
-indirect multi-draws as plain species.
+indirect multi-draws as plain species. Veined species the same way: one vein field layer per
+species (:class:`~leafview.gpu.vein_draw.VeinDraw`; species with the same shape and venation
+share one), which every leaf of the species reads; ``veins=False`` draws none.
 
 No per-leaf work happens on the CPU after the scene is uploaded. Leaf rows are
 :data:`~leafview.gpu.layout.LEAF_BLOCK` records (the same declaration as the single-leaf uniform
@@ -36,6 +38,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import distance_transform_edt
 
+from leafview.botany.vein_shape import shape_grid
 from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.params import Bending, LeafParams
 from leafview.deform.beam import bend_profiles
@@ -51,10 +54,12 @@ from leafview.gpu.layout import (
     LEAF_OFFSET_UNIFORM,
     LEAF_VERTEX_BLOCK,
     LEAVES_BINDING,
+    NO_VEIN_DEFINES,
     PLAIN_DEFINES,
     SPECIES_BINDING,
     SPECIES_CULL_BLOCK,
     SPECIES_OF_BINDING,
+    VEIN_SKIN_DEFINES,
     VERTICES_BINDING,
     VISIBLE_BINDING,
     feature_defines,
@@ -63,13 +68,16 @@ from leafview.gpu.layout import (
     ripple_keys,
     texture_defines,
     texture_layers,
+    vein_defines,
     write_slot,
     write_texture_layers,
+    write_vein_layers,
 )
 from leafview.gpu.limits import check_scene, ensure_alive
 from leafview.gpu.owner import GLObjects
 from leafview.gpu.resources import GpuResources, JitterTable, RowTexture, record_vertex_array
 from leafview.gpu.textures import LeafTextures
+from leafview.gpu.vein_draw import VeinDraw, fresh_layers
 from leafview.resources import resolve_preset
 from leafview.scene.camera import Camera, top_down
 from leafview.scene.spec import VBAR_GAP, Scene, SceneSpec
@@ -87,7 +95,8 @@ _STEM_ATTRS = (("in_position", "3f", "12x"), ("in_normal", "3f", "12x"), ("in_uv
 
 
 # -- packing (numpy) ------------------------------------------------------------------------------
-def species_tables(scene: Scene) -> tuple[NDArray[Any], NDArray[np.float32], list[tuple[int, float]]]:
+def species_tables(scene: Scene, vein_layers: NDArray[np.int32] | None = None
+                   ) -> tuple[NDArray[Any], NDArray[np.float32], list[tuple[int, float]]]:
     """Per-species LEAF_BLOCK records, the jitter table rows they index and the ripple signal keys
     (row i of the signal buffer), equal to :func:`~leafview.gpu.layout.pack_leaves` of the species.
 
@@ -97,7 +106,9 @@ def species_tables(scene: Scene) -> tuple[NDArray[Any], NDArray[np.float32], lis
     together, once per distinct shape, bending and frame (:func:`leafview.deform.beam.bend_profiles`).
     An extended silhouette is a template of its own (its further rows depend on its whole shape).
     Each species' texture layers are those of :func:`~leafview.gpu.layout.texture_keys` of the
-    species (the array texture :class:`SceneRenderer` binds)."""
+    species (the array texture :class:`SceneRenderer` binds), its vein layer ``vein_layers[i]``
+    (default: :func:`leafview.gpu.vein_draw.fresh_layers` of the species, the layers of a field
+    array built for them, as :class:`SceneRenderer` builds it; -1 without veins)."""
     index: dict[tuple[Any, ...], int] = {}
     by_identity: dict[tuple[int, ...], int] = {}   # the same objects (shared by the species) hash once
     templates: list[LeafParams] = []
@@ -130,6 +141,7 @@ def species_tables(scene: Scene) -> tuple[NDArray[Any], NDArray[np.float32], lis
         for j, name in enumerate(("a1", "a2", "vbar", "xs", "zs", "zf", "zg", "front", "back")):
             recs[name][:, :3] = col[:, 3 * j:3 * j + 3]
         write_texture_layers(recs, texture_layers(scene.species))
+        write_vein_layers(recs, fresh_layers(scene.species) if vein_layers is None else vein_layers)
     if bent:
         first: dict[int, int] = {}                 # bend problem -> the first species that poses it
         for i, b in bent:
@@ -191,7 +203,7 @@ def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
         colours = _vec4_run(part, ("front", "back"))[:, :, :3]
         colours *= scene.tint[start + a:start + b, None, None].astype(np.float32)
         np.clip(colours, np.float32(0.0), np.float32(1.0), out=colours)
-        # rows 0-2 of each column: the last row (0, 0, 0, 1) keeps the species' texture layers (LEAF_SLOTS)
+        # rows 0-2 of each column: the last row keeps the species' texture and vein layers (LEAF_SLOTS)
         part["model"][:, :, :3] = np.transpose(scene.matrices[start + a:start + b, :3], (0, 2, 1))
     return recs
 
@@ -201,9 +213,10 @@ def _lod_error(params: Any, coarse: tuple[int, int], fine: tuple[int, int] = DEF
     through the ``coarse`` grid, sampled at the ``fine`` grid: how far the drawn outline can
     move when a leaf drops to ``coarse``."""
     uv = grid_uv(*fine).astype(np.float64)
-    ref = evaluate(params, uv[:, 0], uv[:, 1])
+    veins = shape_grid(params)
+    ref = evaluate(params, uv[:, 0], uv[:, 1], vein_grid=veins)
     cu, cv = coarse
-    g = evaluate(params, *grid_uv(cu, cv).astype(np.float64).T).reshape(cv, cu, 3)
+    g = evaluate(params, *grid_uv(cu, cv).astype(np.float64).T, vein_grid=veins).reshape(cv, cu, 3)
     x = (uv[:, 0] + 1.0) / 2.0 * (cu - 1)
     y = uv[:, 1] * (cv - 1)
     i = np.minimum(x.astype(int), cu - 2)
@@ -217,11 +230,14 @@ def _lod_error(params: Any, coarse: tuple[int, int], fine: tuple[int, int] = DEF
 def species_cull(scene: Scene, grids: Sequence[tuple[int, int]] = LOD_GRIDS) -> NDArray[Any]:
     """SPECIES_CULL_BLOCK rows, the numpy reference: every species evaluated at every level's
     grid as drawn (:func:`leafview.deform.surface.evaluate` at
-    :func:`~leafview.deform.surface.drawn_uv`), then :func:`cull_rows_from_points`.
+    :func:`~leafview.deform.surface.drawn_uv`, with the species' vein grid), then
+    :func:`cull_rows_from_points`.
     :class:`SceneRenderer` computes the same rows on the GPU (:mod:`leafview.gpu.bounds`)."""
     if len(grids) > 4:
         raise ValueError("at most 4 levels of detail")
-    points = [np.stack([evaluate(sp, *drawn_uv(sp, grid_uv(*g)).T) for sp in scene.species]) for g in grids]
+    veins = [shape_grid(sp) for sp in scene.species]
+    points = [np.stack([evaluate(sp, *drawn_uv(sp, grid_uv(*g)).T, vein_grid=vg) for sp, vg in zip(scene.species, veins)])
+              for g in grids]
     return cull_rows_from_points(points, grids, scene.spec.variation)
 
 
@@ -388,6 +404,9 @@ class SceneRenderer:
     progress: called with the number of leaves uploaded after each batch (progress bars).
     resources: shared programs, prepare pass, targets and capture
         (:class:`~leafview.gpu.resources.GpuResources`); ``None``: a private set.
+    veins: species whose venation is enabled show veins (False: none does; ``--veins off``, no
+        vein field is built). :attr:`show_veins` turns them off and on again per frame (the
+        viewer's checkbox), drawing a ``LEAF_NO_VEINS`` program variant while off.
 
     Raises :class:`SceneLimitError` when the rows cannot fit the context's limits; checks
     ``ctx.error`` after allocating so an out-of-memory is reported, not ignored.
@@ -395,7 +414,7 @@ class SceneRenderer:
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, *, grids: Sequence[tuple[int, int]] = LOD_GRIDS,
                  max_block_bytes: int | None = None, progress: Callable[[int], None] | None = None,
-                 resources: GpuResources | None = None) -> None:
+                 resources: GpuResources | None = None, veins: bool = True) -> None:
         self.ctx, self.scene = ctx, scene
         self.grids: tuple[tuple[int, int], ...] = tuple((int(g[0]), int(g[1])) for g in grids)
         if not 1 <= len(self.grids) <= 4:
@@ -421,7 +440,11 @@ class SceneRenderer:
             # leaf and the file) and uploaded as one array texture before any row is packed
             self.textures = self._objects.own(LeafTextures(ctx))
             self.textures.update(scene.species)
-            self.species_records, table, keys = species_tables(scene)
+            # the species' vein fields (one layer per distinct shape and venation), before the rows too
+            self.veins = self._objects.own(VeinDraw(ctx, self.resources.programs))
+            self.show_veins = veins   # False: draws without veins (a LEAF_NO_VEINS variant), fields kept
+            layers = self.veins.update(scene.species, enabled=veins)
+            self.species_records, table, keys = species_tables(scene, layers)
             self.program = self.resources.leaf_program({"LEAF_INDIRECT": 1, **self._defines()})
             self.cull = self.resources.programs.compute("scene_cull.comp")
             self.compact = self.resources.programs.compute("scene_compact.comp")
@@ -473,11 +496,13 @@ class SceneRenderer:
         finding duplicates would)."""
         self._bind_tables()
         bounds = LeafBounds(self.ctx, self.resources.programs, self.resources.prepare, self.grids)
-        return bounds.run(records, self.scene.spec.variation, feature_defines(records), block_limit=self._block_limit)
+        return bounds.run(records, self.scene.spec.variation, {**feature_defines(records), **vein_defines(records)},
+                          block_limit=self._block_limit)
 
     def _defines(self) -> dict[str, int]:
-        """The feature defines of this scene's leaf programs (vertex branches, textures)."""
-        return {**feature_defines(self.species_records), **texture_defines(self.species_records)}
+        """The feature defines of this scene's leaf programs (vertex branches, textures, veins)."""
+        recs = self.species_records
+        return {**feature_defines(recs), **texture_defines(recs), **vein_defines(recs)}
 
     def _make_stems(self, stems: Any) -> moderngl.VertexArray | None:
         if stems is None or len(stems[2]) == 0:
@@ -492,7 +517,8 @@ class SceneRenderer:
         vbo = self._objects.own(self.ctx.buffer(verts.tobytes()))
         ibo = self._objects.own(self.ctx.buffer(np.asarray(tris, np.uint32).tobytes()))
         self._stem_buffers = (vbo, ibo)
-        return self._stem_vao(self.resources.programs.program("leaf_baked.vert", "leaf.frag", defines=PLAIN_DEFINES))
+        return self._stem_vao(self.resources.programs.program("leaf_baked.vert", "leaf.frag",
+                                                              defines={**PLAIN_DEFINES, **NO_VEIN_DEFINES}))
 
     def _stem_vao(self, prog: moderngl.Program) -> moderngl.VertexArray:
         assert self._stem_buffers is not None
@@ -522,7 +548,8 @@ class SceneRenderer:
             stems = None
             if self._stem_buffers is not None:
                 stems = self._stem_vao(self.resources.programs.program(
-                    "leaf_baked.vert", "leaf.frag", defines={**defines, **PLAIN_DEFINES, "LEAF_STEMS": 1}))
+                    "leaf_baked.vert", "leaf.frag",
+                    defines={**defines, **PLAIN_DEFINES, **NO_VEIN_DEFINES, "LEAF_STEMS": 1}))
             found = self._variants[key] = (prog, vaos, stems)
         return found
 
@@ -530,7 +557,7 @@ class SceneRenderer:
     def set_camera(self, camera: Camera, size: tuple[int, int], *, srgb: bool = True,
                    lighting: type[Lighting] = Lighting) -> None:
         self.camera, self.size = camera, (int(size[0]), int(size[1]))
-        self.frame.set_camera(camera, srgb=srgb, lighting=lighting)
+        self.frame.set_camera(camera, srgb=srgb, lighting=lighting, size=self.size)
 
     def _set_cull_uniforms(self, settings: CullSettings) -> None:
         """Camera and settings uniforms of the culling pass: once per frame, for every batch."""
@@ -581,6 +608,7 @@ class SceneRenderer:
         self.jitter.use()
         self.ripples.bind()
         self.textures.use()
+        self.veins.use()
 
     def draw(self, settings: CullSettings = CullSettings(), *, defines: Mapping[str, object] | None = None) -> None:
         """Cull and draw every batch (and the stems) into the bound framebuffer. A context
@@ -588,10 +616,21 @@ class SceneRenderer:
 
         ``defines``: extra feature defines of a program variant to draw with (e.g. ``LEAF_AOV``,
         the label pass of :mod:`leafview.gpu.aov`); a variant whose vertex shader declares
-        :data:`~leafview.gpu.layout.LEAF_OFFSET_UNIFORM` gets each batch's first leaf there."""
+        :data:`~leafview.gpu.layout.LEAF_OFFSET_UNIFORM` gets each batch's first leaf there.
+
+        Veined scenes draw their finest level with the vein field and the coarser levels (leaves
+        too small on screen for their veins) with the ``LEAF_VEIN_SKIN`` variant, two indirect
+        draws a batch; with :attr:`show_veins` off, the ``LEAF_NO_VEINS`` variant, one."""
         ensure_alive(self.ctx, "drawing a scene")
+        levels = len(self.grids)
+        far: tuple[moderngl.Program, list[moderngl.VertexArray], Any] | None = None
+        if self.veins.active and not self.show_veins:
+            defines = {**(defines or {}), **NO_VEIN_DEFINES}
+        elif self.veins.active and levels > 1 and "LEAF_AOV" not in (defines or {}):
+            # the finest level with its veins, the coarser ones (leaves too small for them) without
+            far = self._variant({**(defines or {}), **VEIN_SKIN_DEFINES})
         program, vaos, stems = self._variant(defines)
-        offset = program.get(LEAF_OFFSET_UNIFORM, None)
+        offsets = [p.get(LEAF_OFFSET_UNIFORM, None) for p in (program, *(far[:1] if far else ()))]
         self.ctx.enable_only(moderngl.DEPTH_TEST)
         self._bind_tables()
         if stems is not None:
@@ -601,9 +640,14 @@ class SceneRenderer:
             ensure_alive(self.ctx, f"drawing batch {i + 1} of {len(self.batches)}")
             self._cull(batch)
             batch.use_rows()
-            if isinstance(offset, moderngl.Uniform):
-                offset.value = batch.start
-            vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=len(self.grids))
+            for offset in offsets:
+                if isinstance(offset, moderngl.Uniform):
+                    offset.value = batch.start
+            if far is None:
+                vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=levels)
+            else:
+                vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=1)
+                far[1][i].render_indirect(batch.commands, moderngl.TRIANGLES, count=levels - 1, first=1)
 
     def level_counts(self) -> NDArray[np.int64]:
         """Leaves drawn at each level in the last :meth:`draw` (reads the commands back)."""
@@ -683,7 +727,7 @@ class SceneRenderer:
         target.clear(background)
         self.set_camera(camera, size)
         if flat:   # the same frame, lighting off
-            self.frame.set_camera(camera, flat=True)
+            self.frame.set_camera(camera, flat=True, size=size)
         self.draw(settings)
         image: NDArray[np.uint8] = target.read()
         check_error(ctx, "scene frame")

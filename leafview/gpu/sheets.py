@@ -22,6 +22,7 @@ from leafview.gpu.layout import pack_leaves, ripple_keys
 from leafview.gpu.renderer import LeafRenderer
 from leafview.gpu.targets import unpremultiply
 from leafview.gpu.textures import LeafTextures
+from leafview.gpu.vein_draw import VeinDraw
 from leafview.scene.camera import Camera, frame_view
 
 __all__ = ["render_leaves", "render_lobed"]
@@ -30,12 +31,13 @@ __all__ = ["render_leaves", "render_lobed"]
 def render_leaves(leaves: Sequence[LeafParams], size: tuple[int, int] = (256, 256), view: str = "top",
                   *, grid: tuple[int, int] = DETAIL_GRID, samples: int | None = None,
                   flat: bool = False, renderer: LeafRenderer | None = None,
-                  camera: Camera | None = None) -> NDArray[np.uint8]:
+                  camera: Camera | None = None, veins: bool = True) -> NDArray[np.uint8]:
     """Draw ``leaves`` (world placement from each one's transform) into one (h, w, 4) uint8 sRGB
     image with a transparent background, framed like :meth:`LeafRenderer.render` (top view: no
     multisampling; other views 4×), or by ``camera`` (:func:`leafview.scene.camera.frame_view`) when
-    given. ``flat``: unlit colours (tests). Draws with ``renderer``'s shared resources (default:
-    the shared headless renderer's)."""
+    given. ``flat``: unlit colours (tests); ``veins``: leaves whose venation is enabled show their
+    veins (``--veins``). Draws with ``renderer``'s shared resources (default: the shared headless
+    renderer's)."""
     resources = (renderer or default_renderer()).resources
     ctx = resources.ctx
     w, h = int(size[0]), int(size[1])
@@ -43,11 +45,13 @@ def render_leaves(leaves: Sequence[LeafParams], size: tuple[int, int] = (256, 25
         samples = 0 if view == "top" else 4
     samples = min(samples, ctx.max_samples)
     textures = LeafTextures(ctx)
+    vein_draw = VeinDraw(ctx, resources.programs)
     try:
         keys = textures.update(leaves)        # a missing or unreadable image: refused before anything is drawn
-        records, tables = pack_leaves(leaves, textures=keys)
+        vein_layers = vein_draw.update(leaves, enabled=veins)
+        records, tables = pack_leaves(leaves, textures=keys, vein_layers=vein_layers)
         with InstancedLeaves(ctx, records, grid, jitter_tables=tables, ripple_signals=ripple_keys(leaves),
-                             resources=resources, textures=textures) as inst:
+                             resources=resources, textures=textures, veins=vein_draw) as inst:
             pos, _ = inst.capture()
             if camera is None:
                 camera = frame_view(view, pos.reshape(-1, 3).astype(np.float64), (w, h))
@@ -61,6 +65,7 @@ def render_leaves(leaves: Sequence[LeafParams], size: tuple[int, int] = (256, 25
             ctx.disable(moderngl.DEPTH_TEST)
     finally:
         textures.release()
+        vein_draw.release()
     return unpremultiply(img) if samples else img
 
 

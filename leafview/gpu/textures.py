@@ -44,7 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.colour import linear_to_srgb, srgb_to_linear  # re-exported: the lookup's twins
 from leafview.core.params import LeafParams
-from leafview.core.texture import texture_st
+from leafview.core.texture import bilinear, texture_st
 from leafview.errors import GpuLimitError, ParamError
 from leafview.gpu.layout import TEXTURE_UNIT, texture_keys
 from leafview.gpu.limits import MAX_RESOURCE_BYTES, gib
@@ -74,20 +74,7 @@ def sample_layer(layer: NDArray[np.uint8], s: ArrayLike, t: ArrayLike) -> NDArra
     """GL's linear filtering of one RGBA8 layer (h, w, 4) at image coordinates (s, t), level 0,
     clamped to the edge: (..., 4) in [0, 1] (rgb still sRGB-encoded). Texel (i, j) (column, row)
     is centred at ((i + 0.5) / w, (j + 0.5) / h); row 0 at t = 0."""
-    img = np.asarray(layer, np.float64) / 255.0
-    h, w = img.shape[:2]
-    x = np.asarray(s, np.float64) * w - 0.5
-    y = np.asarray(t, np.float64) * h - 0.5
-    x0, y0 = np.floor(x), np.floor(y)
-    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
-    i0 = np.clip(x0.astype(np.int64), 0, w - 1)
-    i1 = np.clip(x0.astype(np.int64) + 1, 0, w - 1)
-    j0 = np.clip(y0.astype(np.int64), 0, h - 1)
-    j1 = np.clip(y0.astype(np.int64) + 1, 0, h - 1)
-    top = img[j0, i0] * (1.0 - fx) + img[j0, i1] * fx
-    bottom = img[j1, i0] * (1.0 - fx) + img[j1, i1] * fx
-    out: NDArray[np.float64] = top * (1.0 - fy) + bottom * fy
-    return out
+    return bilinear(np.asarray(layer, np.float64) / 255.0, s, t)
 
 
 def texture_lookup(layer: NDArray[np.uint8], u: ArrayLike, v: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:

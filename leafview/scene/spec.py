@@ -35,6 +35,7 @@ import tomli_w
 from numpy.typing import NDArray
 
 from leafview.atomic import write_text
+from leafview.botany.vein_shape import shape_grid
 from leafview.core.compact import compact_dict, parse_compact
 from leafview.core.display import png_of
 from leafview.core.io import load_params, read_document
@@ -487,13 +488,15 @@ def _unplaced(leaf: LeafParams, identity: Transform) -> LeafParams:
 
 def evaluate_leaf(scene: Scene, i: int, u: NDArray[np.floating], v: NDArray[np.floating]) -> NDArray[np.float64]:
     """Leaf-space points of leaf ``i`` as the scene draws it: its own shape, jitter and ripples,
-    bent by its species' cantilever profile (the numpy reference of the GPU rows)."""
+    bent by its species' cantilever profile and shaped by its species' vein grid (the numpy
+    reference of the GPU rows)."""
 
     own = scene.leaf(int(i))
-    if not own.bending.active:
-        return partials(own, u, v).L
     sp = scene.species[int(scene.species_id[i])]
-    return partials(own.replace(bending=Bending()), u, v, bend=bend_profile(sp)).L
+    grid = shape_grid(sp)   # every leaf of a species reads its species' vein grid (one field layer each)
+    if not own.bending.active:
+        return partials(own, u, v, vein_grid=grid).L
+    return partials(own.replace(bending=Bending()), u, v, bend=bend_profile(sp), vein_grid=grid).L
 
 
 def bend_deviation(scene: Scene, sample: Sequence[int]) -> float:
