@@ -100,8 +100,8 @@ def test_nonfinite_vertices_are_refused_before_writing(tmp_path, presets, monkey
 
     real = bake_mod.tessellate
 
-    def broken(params, nu, nv):
-        m = real(params, nu, nv)
+    def broken(params, nu, nv, **kwargs):
+        m = real(params, nu, nv, **kwargs)
         m.vertices[nu * 3 + 2] = np.nan
         return m
 

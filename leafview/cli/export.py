@@ -8,6 +8,11 @@ writes that file (a leaf set and ``-o FILE``: all its placed leaves in that file
 presets write one file each into ``-o DIR`` (format from ``--format``, default glb); a scene
 file (a TOML/JSON document with ``[[species]]``, see :mod:`leafview.scene.spec`) writes the
 whole scene into ``-o FILE``.
+
+``--mesh cdt`` exports presets as venation meshes instead of the (u, v) grid: a constrained
+Delaunay triangulation with the veins of order <= 2 as edges (:mod:`leafview.export.cdt`;
+``--max-area``, ``--min-angle``), and for a leaf with veins its baked vein textures
+(:mod:`leafview.export.vein_maps`: base colour and normal maps of both sides).
 Every input is validated before anything is baked; files are written atomically.
 """
 
@@ -20,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from leafview.atomic import outputs
+from leafview.atomic import check_target, outputs
 from leafview.cli.args import (
     EXIT_OK,
     expand_presets,
@@ -45,22 +50,39 @@ from leafview.export import (
     format_of,
     write,
 )
+from leafview.export.cdt import DEFAULT_MAX_AREA, DEFAULT_MIN_ANGLE, bake_cdt, check_max_area, check_min_angle
 from leafview.export.gltf import BACK_FACES, INSTANCING_MODES
 from leafview.export.mesh import BACKENDS, DEFAULT_RESOLUTION, check_resolution
 from leafview.export.objply import UP_AXES
 from leafview.export.scene import leaf_scene
 from leafview.export.textures import check_textures
+from leafview.export.vein_maps import bake_vein_maps, vein_scene
 from leafview.scene.spec import build_scene, load_scene, scene_from_leaves
 
 __all__ = ["add_arguments", "run"]
 
 _FORMAT_NAMES = tuple(s.lstrip(".") for s in FORMATS)
+MESHES = ("grid", "cdt")
 
 
 def _resolution(text: str) -> tuple[int, int]:
     nu, nv = grid(text)
     try:
         return check_resolution((nu, nv))
+    except UsageError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _max_area(text: str) -> float:
+    try:
+        return check_max_area(text, "--max-area")
+    except UsageError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _min_angle(text: str) -> float:
+    try:
+        return check_min_angle(text, "--min-angle")
     except UsageError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
@@ -85,8 +107,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", required=True, type=output_path, metavar="FILE|DIR")
     parser.add_argument("--format", choices=_FORMAT_NAMES, default=None,
                         help="file type for -o DIR (default glb), or to check -o FILE's suffix")
-    parser.add_argument("--resolution", type=_resolution, default=DEFAULT_RESOLUTION, metavar="NUxNV",
-                        help="(u, v) samples across and along the blade (default 33x65)")
+    parser.add_argument("--resolution", type=_resolution, default=None, metavar="NUxNV",
+                        help="grid mesh: (u, v) samples across and along the blade (default 33x65)")
+    parser.add_argument("--mesh", choices=MESHES, default="grid",
+                        help="grid: the (u, v) grid the renderer draws (default); cdt: a constrained Delaunay "
+                             "triangulation with the veins as edges, and baked vein textures (presets only)")
+    parser.add_argument("--max-area", type=_max_area, default=None, metavar="A",
+                        help=f"cdt: largest triangle area in leaf lengths² (default {DEFAULT_MAX_AREA:g})")
+    parser.add_argument("--min-angle", type=_min_angle, default=None, metavar="DEG",
+                        help=f"cdt: smallest angle away from sharper input angles (default {DEFAULT_MIN_ANGLE:g}; "
+                             "at most 33)")
     parser.add_argument("--backend", choices=BACKENDS, default="gpu",
                         help="gpu: vertices read back from the rendering shader (default); numpy: the "
                              "float64 reference (no OpenGL needed)")
@@ -196,8 +226,22 @@ def run(args: argparse.Namespace) -> int:
         raise GLUnavailable(f"{exc}\n  export without OpenGL: --backend numpy (the float64 reference)") from None
 
 
+def _check_mesh_options(args: argparse.Namespace) -> None:
+    """Refuse the options of the other mesh kind."""
+    if args.mesh == "cdt":
+        if args.resolution is not None:
+            raise UsageError("--resolution applies to --mesh grid; --mesh cdt takes --max-area and --min-angle")
+    else:
+        for flag, value in (("--max-area", args.max_area), ("--min-angle", args.min_angle)):
+            if value is not None:
+                raise UsageError(f"{flag} applies to --mesh cdt only")
+    if args.resolution is None:
+        args.resolution = DEFAULT_RESOLUTION
+
+
 def _run(args: argparse.Namespace) -> int:
     started = time.perf_counter()
+    _check_mesh_options(args)
     paths = expand_presets(args.inputs)
     kind = _parametric(Path(args.output))
     if kind:
@@ -208,8 +252,12 @@ def _run(args: argparse.Namespace) -> int:
     if scenes:
         if len(paths) != 1:
             raise UsageError(f"{scenes[0]} is a scene file: export it on its own")
+        if args.mesh == "cdt":
+            raise UsageError(f"{scenes[0]} is a scene file: --mesh cdt exports presets (one leaf a file)")
         return _run_scene(args, scenes[0], started)
     leaves = load_leaf_files(paths)                       # validate everything first
+    if args.mesh == "cdt":
+        return _run_cdt(args, paths, leaves, started)
     if len(paths) == 1 and len(leaves) > 1 and Path(args.output).suffix.lower() in FORMATS:
         return _run_scene(args, paths[0], started, leaves=leaves)   # a leaf set into one file
     mode, out, fmt = _target(args, len(leaves))
@@ -260,4 +308,37 @@ def _run_scene(args: argparse.Namespace, path: Path, started: float,
     if not args.quiet:
         print(f"wrote {out} ({len(scene)} leaves, {shapes} distinct shapes, {_file_size(out)}) "
               f"in {time.perf_counter() - started:.1f} s")
+    return EXIT_OK
+
+
+def _run_cdt(args: argparse.Namespace, paths: list[Path], leaves: list[LeafParams], started: float) -> int:
+    """``--mesh cdt``: each leaf's venation mesh and vein textures, one file each."""
+    if len(paths) == 1 and len(leaves) > 1 and Path(args.output).suffix.lower() in FORMATS:
+        raise UsageError(f"{paths[0]} is a leaf set: --mesh cdt writes one leaf a file (use -o DIR)")
+    mode, out, fmt = _target(args, len(leaves))
+    names = [leaf.name for leaf in leaves]
+    files = output_names(names, quiet=args.quiet) if mode == "dir" else names
+    suffix = next(s for s, f in FORMATS.items() if f == fmt)
+    targets = [out] if mode == "file" else [out / f"{name}{suffix}" for name in files]
+    for target in targets:
+        check_target(target)                                  # a folder that cannot take it: before the bake
+    check_textures([(name or "leaf", leaf.texture) for name, leaf in zip(names, leaves)])
+    area = DEFAULT_MAX_AREA if args.max_area is None else args.max_area
+    angle = DEFAULT_MIN_ANGLE if args.min_angle is None else args.min_angle
+    opts = _options(args, fmt)
+    baked = []
+    with progress_bar(total=len(leaves), unit="leaf", desc="meshing", quiet=args.quiet or mode == "file") as bar:
+        for leaf in leaves:     # everything baked (PNGs encoded) before the transaction stages a file
+            baked.append((bake_cdt(leaf, max_area=area, min_angle=angle, backend=args.backend), bake_vein_maps(leaf)))
+            bar.update(1)
+    with outputs():             # every file or none
+        for leaf, target, (cdt, maps) in zip(leaves, targets, baked):
+            write(vein_scene(leaf, cdt.mesh, maps, length_m=args.length_m), target, **opts)
+    if not args.quiet and mode == "file":
+        cdt, maps = baked[0]
+        textures = "" if maps is None else f", {len(maps.images)} vein textures"
+        print(f"wrote {out} ({names[0] or 'leaf'}: {cdt.quality}{textures}, {_file_size(out)}) "
+              f"in {time.perf_counter() - started:.1f} s")
+    if not args.quiet and mode == "dir":
+        print(f"wrote {len(targets)} {fmt} venation meshes to {out}/ in {time.perf_counter() - started:.1f} s")
     return EXIT_OK

@@ -27,7 +27,12 @@ Layout of a written file:
   only (glTF has no per-face texture). Images are stored in the binary buffer (a buffer view
   with ``mimeType``) in ``.glb`` and ``.gltf`` alike, so a ``.gltf`` stays one self-contained
   file; each image file is stored once, and one material per image and side, however many
-  leaves or shapes use it (a textured species' colour variation is not exported).
+  leaves or shapes use it (a textured species' colour variation is not exported);
+* baked vein textures (:mod:`leafview.export.vein_maps`, ``export --mesh cdt`` of a leaf with
+  veins): each side's base colour image as its ``baseColorTexture`` (opaque: it covers the blade)
+  and its tangent-space vein relief as ``normalTexture``, the primitives carrying the maps'
+  frame as ``TANGENT`` (:func:`leafview.export.vein_maps.tangents`; the back's w negated), the
+  images stored like those above.
 
 Buffer views are 4-byte aligned, POSITION accessors carry min/max, indices are unsigned short
 when every index fits below 65535 (the primitive-restart value), else unsigned int.
@@ -51,6 +56,7 @@ from leafview.errors import UsageError
 from leafview.export.mesh import LeafMesh, check_mesh, gltf_st
 from leafview.export.scene import BARK, TRS, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs, scene_textures
 from leafview.export.textures import TextureImage
+from leafview.export.vein_maps import maps_of, tangents, with_maps
 
 __all__ = ["BACK_FACES", "INSTANCING_MODES", "Z_UP_TO_Y_UP", "gltf_document", "write_gltf"]
 
@@ -119,10 +125,14 @@ class _Builder:
         return self._textures[image]
 
     def material(self, name: str, colour: Sequence[float], translucency: float, double_sided: bool,
-                 extras: dict[str, Any], image: TextureImage | None = None) -> int:
-        """A material of ``colour``, or of ``image`` (cut out by its alpha) when one is given."""
+                 extras: dict[str, Any], image: TextureImage | None = None, *, mask: bool = True,
+                 normal: TextureImage | None = None) -> int:
+        """A material of ``colour``, or of ``image`` (cut out by its alpha unless ``mask`` is
+        false: a baked vein texture covers the blade) when one is given, with the tangent-space
+        ``normal`` map when given."""
         tex = None if image is None else self.texture(image)
-        key = (name, tuple(colour) if tex is None else None, translucency, double_sided, tex)
+        ntex = None if normal is None else self.texture(normal)
+        key = (name, tuple(colour) if tex is None else None, translucency, double_sided, tex, mask, ntex)
         if key in self._materials:
             return self._materials[key]
         factor = [*map(float, colour)] if tex is None else [1.0, 1.0, 1.0]
@@ -131,7 +141,10 @@ class _Builder:
                                "extras": {"leafview": extras}}
         if tex is not None:
             pbr["baseColorTexture"] = {"index": tex, "texCoord": 0}
-            mat["alphaMode"], mat["alphaCutoff"] = "MASK", ALPHA_CUTOFF
+            if mask:
+                mat["alphaMode"], mat["alphaCutoff"] = "MASK", ALPHA_CUTOFF
+        if ntex is not None:
+            mat["normalTexture"] = {"index": ntex, "texCoord": 0}
         if translucency > 0.0:
             diffuse: dict[str, Any] = {"diffuseTransmissionFactor": float(translucency),
                                        "diffuseTransmissionColorFactor": factor}
@@ -151,7 +164,8 @@ class _Builder:
 def _leaf_materials(b: _Builder, part: ExportPart, back_faces: str,
                     images: tuple[TextureImage, TextureImage] | None) -> tuple[int, int | None]:
     """The front and back materials of ``part`` (back None for ``back_faces="double-sided"``),
-    textured with ``images`` (front, back) when the leaf has them."""
+    textured with ``images`` (front, back) when the leaf has them, with the normal maps of its
+    baked vein textures (:mod:`leafview.export.vein_maps`) when it has those."""
     m = part.material
     extras: dict[str, Any] = {"front": list(m.front), "back": list(m.back), "translucency": m.translucency}
     front_img: TextureImage | None = None
@@ -161,11 +175,18 @@ def _leaf_materials(b: _Builder, part: ExportPart, back_faces: str,
         front_img, back_img = images
         front_label, back_label = front_img.name, back_img.name
         extras["texture"] = {"front": front_label, "back": back_label}
+    maps = maps_of(part)
+    front_nrm, back_nrm = (maps.normal, maps.back_normal) if maps is not None else (None, None)
+    if maps is not None:
+        extras["vein_maps"] = [image.name for image in maps.images]
+    mask = part.texture is not None       # a photograph's alpha cuts the margin out; baked maps cover the blade
     if back_faces == "double-sided":
-        return b.material(f"leaf {front_label}", m.front, m.translucency, True, extras, front_img), None
+        return b.material(f"leaf {front_label}", m.front, m.translucency, True, extras, front_img, mask=mask,
+                          normal=front_nrm), None
     front = b.material(f"leaf front {front_label}", m.front, m.translucency, False, {**extras, "side": "front"},
-                       front_img)
-    back = b.material(f"leaf back {back_label}", m.back, m.translucency, False, {**extras, "side": "back"}, back_img)
+                       front_img, mask=mask, normal=front_nrm)
+    back = b.material(f"leaf back {back_label}", m.back, m.translucency, False, {**extras, "side": "back"}, back_img,
+                      mask=mask, normal=back_nrm)
     return front, back
 
 
@@ -173,18 +194,26 @@ def _hex(colour: Sequence[float]) -> str:
     return "#" + "".join(f"{round(min(max(c, 0.0), 1.0) * 255):02x}" for c in colour)
 
 
-def _mesh(b: _Builder, mesh: LeafMesh, name: str, front_mat: int, back_mat: int | None) -> int:
-    """A glTF mesh for ``mesh``: front primitive, plus the back one when ``back_mat`` is set."""
+def _mesh(b: _Builder, mesh: LeafMesh, name: str, front_mat: int, back_mat: int | None, *,
+          with_tangents: bool = False) -> int:
+    """A glTF mesh for ``mesh``: front primitive, plus the back one when ``back_mat`` is set;
+    ``with_tangents``: TANGENT attributes for normal maps (:func:`leafview.export.vein_maps.tangents`)."""
     check_mesh(mesh)
     v = mesh.n_vertices
     pos = b.accessor(mesh.positions, bounds=True)
     nrm = b.accessor(mesh.normals)
     tex = b.accessor(gltf_st(mesh.uv))      # glTF texture space: t runs downwards
-    prims = [{"attributes": {"POSITION": pos, "NORMAL": nrm, "TEXCOORD_0": tex},
-              "indices": b.indices(mesh.indices, v), "material": front_mat, "mode": 4}]
+    tan = tangents(mesh) if with_tangents else None     # the frame of the normal maps
+    front: dict[str, Any] = {"POSITION": pos, "NORMAL": nrm, "TEXCOORD_0": tex}
+    if tan is not None:
+        front["TANGENT"] = b.accessor(tan)
+    prims = [{"attributes": front, "indices": b.indices(mesh.indices, v), "material": front_mat, "mode": 4}]
     if back_mat is not None:
-        prims.append({"attributes": {"POSITION": pos, "NORMAL": b.accessor(-mesh.normals), "TEXCOORD_0": tex},
-                      "indices": b.indices(mesh.indices[:, ::-1], v), "material": back_mat, "mode": 4})
+        back: dict[str, Any] = {"POSITION": pos, "NORMAL": b.accessor(-mesh.normals), "TEXCOORD_0": tex}
+        if tan is not None:       # w negated: the back's bitangent, cross(-n, t) w, keeps its direction
+            back["TANGENT"] = b.accessor(tan * np.array([1.0, 1.0, 1.0, -1.0], np.float32))
+        prims.append({"attributes": back, "indices": b.indices(mesh.indices[:, ::-1], v), "material": back_mat,
+                      "mode": 4})
     b.doc["meshes"].append({"name": name, "primitives": prims})
     return len(b.doc["meshes"]) - 1
 
@@ -234,7 +263,7 @@ def _place(b: _Builder, part: ExportPart, trs: TRS, mesh_id: int,
             nodes.append(b.node({**entry, **_trs_entry(t[i], q[i], s[i])}))
     for i in np.flatnonzero(~ok):      # shear: bake this copy into world space
         copy = _world_copy(part.mesh, part.matrices[i])
-        mid = _mesh(b, copy, f"{part.name}.{i} (baked, non-TRS)", *mats)
+        mid = _mesh(b, copy, f"{part.name}.{i} (baked, non-TRS)", *mats, with_tangents=maps_of(part) is not None)
         nodes.append(b.node({"name": f"{part.name}.{i}", "mesh": mid}))
     return nodes
 
@@ -248,12 +277,12 @@ def gltf_document(scene: ExportScene, *, back_faces: str = "primitive", instanci
         raise UsageError(f"unknown instancing mode {instancing!r} (use {', '.join(INSTANCING_MODES)})")
     if not (np.isfinite(scene.length_m) and scene.length_m > 0):
         raise UsageError(f"length_m must be a positive number of metres, got {scene.length_m!r}")
-    textures = scene_textures(scene)     # every image read and checked before anything is built
+    textures = with_maps(scene, scene_textures(scene))   # every image read and checked before anything is built
     b = _Builder()
     children: list[int] = []
     for k, (part, trs) in enumerate(zip(scene.parts, parts_trs(scene.parts))):
         mats = _leaf_materials(b, part, back_faces, textures.of(k))
-        mesh_id = _mesh(b, part.mesh, part.name, *mats)
+        mesh_id = _mesh(b, part.mesh, part.name, *mats, with_tangents=maps_of(part) is not None)
         children += _place(b, part, trs, mesh_id, mats, instancing, instance_threshold)
     if scene.stems is not None:
         pos, nrm, idx = scene.stems

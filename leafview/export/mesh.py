@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from leafview.botany.vein_shape import shape_grid
 from leafview.core.blade import drawn_uv
 from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.params import LeafParams
@@ -236,7 +237,7 @@ def bake_many(leaves: Iterable[LeafParams], resolution: Sequence[int] = DEFAULT_
         if renderer is not None and backend == "gpu":   # "gpu" always has a renderer by now
             pos, nrm = renderer.capture(params, uv32[:, 0], uv32[:, 1])
         else:
-            ref = tessellate(params, nu, nv)  # the same grid_uv order, float64
+            ref = tessellate(params, nu, nv, vein_grid=shape_grid(params))  # the same grid_uv order, float64
             pos, nrm = ref.vertices, ref.normals
         # the surface parameters drawn (a one-sided leaf spreads the grid over its half), so that
         # the texture coordinates of both halves of an asymmetric leaf follow texture_st

@@ -21,6 +21,11 @@ leaf shows its front image.
   with more than one image each face has an ``int texnumber`` (the image's order among those
   comments, -1 for a plain leaf or the stems).
 
+Baked vein textures (:mod:`leafview.export.vein_maps`, ``export --mesh cdt`` of a leaf with veins)
+count as the front image (without ``map_d``: they cover the blade); OBJ adds the front normal map
+as ``map_Bump -bm 1`` (what Blender's importer reads as a tangent-space normal map), PLY has no
+place for it.
+
 PLY: ``binary_little_endian 1.0``, vertex properties ``x y z nx ny nz s t`` (float32), faces as
 ``list uchar uint vertex_indices``.
 """
@@ -41,6 +46,7 @@ from leafview.errors import UsageError
 from leafview.export.mesh import check_mesh
 from leafview.export.scene import BARK, ExportScene, scene_textures
 from leafview.export.textures import SceneTextures, TextureImage, write_images
+from leafview.export.vein_maps import maps_of, with_maps
 
 __all__ = ["UP_AXES", "axis_matrix", "world_triangles", "write_obj", "write_ply"]
 
@@ -109,14 +115,17 @@ def _mtl(scene: ExportScene, textures: SceneTextures, files: dict[TextureImage, 
     per_part = []
     for index, part in enumerate(scene.parts):
         sides = textures.of(index)
+        maps = maps_of(part)
+        bump = "" if maps is None else f"map_Bump -bm 1 {files[maps.normal]}\n"
         if sides is None:
             colour = part.material.front
-            per_part.append(add(("colour", tuple(colour)), _obj_name(f"leaf_{_hex(colour)}"),
-                                f"Kd {colour[0]:.6g} {colour[1]:.6g} {colour[2]:.6g}\n{plain}"))
+            per_part.append(add(("colour", tuple(colour), bump), _obj_name(f"leaf_{_hex(colour)}"),
+                                f"Kd {colour[0]:.6g} {colour[1]:.6g} {colour[2]:.6g}\n{plain}{bump}"))
         else:
             file = files[sides[0]]
-            per_part.append(add(sides[0], _obj_name(f"leaf_{Path(file).stem}"),
-                                f"Kd 1 1 1\n{plain}map_Kd {file}\nmap_d {file}\n"))
+            cut = f"map_d {file}\n" if part.texture is not None else ""   # a photograph's alpha; baked maps cover the blade
+            per_part.append(add((sides[0], bump), _obj_name(f"leaf_{Path(file).stem}"),
+                                f"Kd 1 1 1\n{plain}map_Kd {file}\n{cut}{bump}"))
     if scene.stems is not None:
         per_part.append(add("bark", "bark", f"Kd {BARK[0]:.6g} {BARK[1]:.6g} {BARK[2]:.6g}\n{plain}"))
     return "".join(lines), per_part
@@ -130,7 +139,7 @@ def write_obj(scene: ExportScene, path: str | Path, *, up: str = "y") -> Path:
     """Write ``scene`` as a Wavefront OBJ (``v``, ``vt``, ``vn``, ``f a/a/a``) atomically, with
     ``NAME.mtl`` and the images beside it when some leaves are textured (all files or none)."""
     path = check_target(path)
-    textures = scene_textures(scene).front_only()   # images read and checked before anything is written
+    textures = with_maps(scene, scene_textures(scene).front_only(), one_sided=True)   # read and checked first
     mtl_path = path.with_name("_".join(path.stem.split()) + ".mtl")   # mtllib names may not hold blanks
     if textures:
         check_target(mtl_path)
@@ -171,7 +180,7 @@ def write_ply(scene: ExportScene, path: str | Path, *, up: str = "y") -> Path:
     """Write ``scene`` as one binary little-endian PLY mesh atomically, with the images of its
     textured leaves beside it (all files or none)."""
     path = check_target(path)
-    textures = scene_textures(scene).front_only()   # images read and checked before anything is written
+    textures = with_maps(scene, scene_textures(scene).front_only(), one_sided=True, normals=False)   # read first
     chunks = list(world_triangles(scene, up))
     for name, pos, *_ in chunks:
         _check_finite(name, pos)

@@ -31,6 +31,12 @@ the margin out. The front mesh shows the front image, the back mesh the back ima
 one when there is none; ``back_faces="double-sided"``: the front image only). One material per
 image and side, whatever the leaves' colours.
 
+Baked vein textures (:mod:`leafview.export.vein_maps`, ``export --mesh cdt`` of a leaf with
+veins) are files beside the layer too: each side's base colour through the same network without
+the opacity cut (it covers the blade), and its tangent-space normal map through a second
+``UsdUVTexture`` (``sourceColorSpace`` raw, ``scale`` (2, 2, 2, 1), ``bias`` (-1, -1, -1, 0)) into
+the surface's ``normal``.
+
 PointInstancer copies are stored as positions, ``orientations`` (quath, read by every USD
 version) plus ``orientationsf`` (quatf, full precision, preferred where the schema has it) and
 scales; a copy whose matrix is not TRS (shear) becomes its own Xform with the full matrix.
@@ -52,6 +58,7 @@ from leafview.export.gltf import ALPHA_CUTOFF, BACK_FACES
 from leafview.export.mesh import LeafMesh, check_mesh
 from leafview.export.scene import BARK, TRS, TRS_TOLERANCE, ExportPart, ExportScene, parts_trs, scene_textures
 from leafview.export.textures import SceneTextures, TextureImage, write_images
+from leafview.export.vein_maps import maps_of, with_maps
 
 __all__ = ["usd_layer", "write_usd"]
 
@@ -126,34 +133,53 @@ class _Writer:
         self.attr(spec, "info:id", self.T.Token, shader_id, uniform=True)
         return spec
 
-    def image_network(self, material: str, surface: Any, image: str) -> None:
-        """Wire ``surface`` (a UsdPreviewSurface spec) to the texture file ``image`` (beside the
-        layer): rgb into diffuseColor, alpha into opacity, cut at ALPHA_CUTOFF."""
+    def texture(self, material: str, name: str, image: str, colour_space: str) -> Any:
+        """A clamped ``UsdUVTexture`` ``material/name`` of the file ``image`` (beside the layer)
+        read at the mesh's ``st`` (one primvar reader per material)."""
         T = self.T
-        reader = self.shader(f"{material}/TexCoord", "UsdPrimvarReader_float2")
-        self.attr(reader, "inputs:varname", T.String, "st")
-        self.attr(reader, "outputs:result", T.Float2)
-        tex = self.shader(f"{material}/Image", "UsdUVTexture")
+        if self.layer.GetPrimAtPath(f"{material}/TexCoord") is None:
+            reader = self.shader(f"{material}/TexCoord", "UsdPrimvarReader_float2")
+            self.attr(reader, "inputs:varname", T.String, "st")
+            self.attr(reader, "outputs:result", T.Float2)
+        tex = self.shader(f"{material}/{name}", "UsdUVTexture")
         self.attr(tex, "inputs:file", T.Asset, self.Sdf.AssetPath(f"./{image}"))
         self.connect(tex, "inputs:st", T.Float2, f"{material}/TexCoord.outputs:result")
         for wrap in ("inputs:wrapS", "inputs:wrapT"):
             self.attr(tex, wrap, T.Token, "clamp")
-        self.attr(tex, "inputs:sourceColorSpace", T.Token, "sRGB")
+        self.attr(tex, "inputs:sourceColorSpace", T.Token, colour_space)
         self.attr(tex, "outputs:rgb", T.Float3)
-        self.attr(tex, "outputs:a", T.Float)
+        return tex
+
+    def image_network(self, material: str, surface: Any, image: str, *, mask: bool = True) -> None:
+        """Wire ``surface`` (a UsdPreviewSurface spec) to the texture file ``image`` (beside the
+        layer): rgb into diffuseColor and, with ``mask``, alpha into opacity, cut at ALPHA_CUTOFF."""
+        T = self.T
+        tex = self.texture(material, "Image", image, "sRGB")
         self.connect(surface, "inputs:diffuseColor", T.Color3f, f"{material}/Image.outputs:rgb")
-        self.connect(surface, "inputs:opacity", T.Float, f"{material}/Image.outputs:a")
-        self.attr(surface, "inputs:opacityThreshold", T.Float, ALPHA_CUTOFF)
+        if mask:
+            self.attr(tex, "outputs:a", T.Float)
+            self.connect(surface, "inputs:opacity", T.Float, f"{material}/Image.outputs:a")
+            self.attr(surface, "inputs:opacityThreshold", T.Float, ALPHA_CUTOFF)
+
+    def normal_network(self, material: str, surface: Any, image: str) -> None:
+        """Wire the tangent-space normal map ``image`` (``(n + 1) / 2``, linear) into ``surface``'s
+        ``normal``, scaled and biased back to [-1, 1] as UsdPreviewSurface expects."""
+        T, Gf = self.T, self.Gf
+        tex = self.texture(material, "Normal", image, "raw")
+        self.attr(tex, "inputs:scale", T.Float4, Gf.Vec4f(2.0, 2.0, 2.0, 1.0))
+        self.attr(tex, "inputs:bias", T.Float4, Gf.Vec4f(-1.0, -1.0, -1.0, 0.0))
+        self.connect(surface, "inputs:normal", T.Normal3f, f"{material}/Normal.outputs:rgb")
 
     # -- content ----------------------------------------------------------------------------
     def material(self, name: str, colour: Sequence[float], translucency: float, extra: dict[str, Any],
-                 image: str | None = None) -> str:
-        """A UsdPreviewSurface material of ``colour``, or of the texture file ``image``."""
+                 image: str | None = None, *, mask: bool = True, normal: str | None = None) -> str:
+        """A UsdPreviewSurface material of ``colour``, or of the texture file ``image`` (cut out by
+        its alpha with ``mask``), with the normal map file ``normal`` when given."""
         if image is None:
             key: tuple[Any, ...] = (tuple(colour), translucency, tuple(sorted(
-                (k, tuple(v) if isinstance(v, (list, tuple)) else v) for k, v in extra.items())))
+                (k, tuple(v) if isinstance(v, (list, tuple)) else v) for k, v in extra.items())), normal)
         else:
-            key = (image, translucency, extra.get("side"))
+            key = (image, translucency, extra.get("side"), mask, normal)
         if key in self.materials:
             return self.materials[key]
         Gf, T = self.Gf, self.T
@@ -163,7 +189,9 @@ class _Writer:
         if image is None:
             self.attr(shader, "inputs:diffuseColor", T.Color3f, Gf.Vec3f(*map(float, colour)))
         else:
-            self.image_network(path, shader, image)
+            self.image_network(path, shader, image, mask=mask)
+        if normal is not None:
+            self.normal_network(path, shader, normal)
         self.attr(shader, "inputs:roughness", T.Float, 0.6)
         self.attr(shader, "inputs:metallic", T.Float, 0.0)
         self.attr(shader, "outputs:surface", T.Token)
@@ -178,16 +206,21 @@ class _Writer:
         self.materials[key] = path
         return path
 
-    def leaf_materials(self, part: ExportPart, images: tuple[str, str] | None = None) -> tuple[str, str | None]:
+    def leaf_materials(self, part: ExportPart, images: tuple[str, str] | None = None,
+                       normals: tuple[str, str] | None = None) -> tuple[str, str | None]:
         """The front and back materials of ``part``, textured by the files ``images`` (front,
-        back) when given."""
+        back) when given, with the normal map files ``normals`` (front, back) when given."""
         m = part.material
         extra = {"front": m.front, "back": m.back}
         front_img, back_img = images if images is not None else (None, None)
+        front_nrm, back_nrm = normals if normals is not None else (None, None)
+        mask = part.texture is not None      # a photograph's alpha cuts the margin out; baked maps cover the blade
         if self.back_faces == "double-sided":
-            return self.material("leaf", m.front, m.translucency, extra, front_img), None
-        return (self.material("leaf_front", m.front, m.translucency, {**extra, "side": "front"}, front_img),
-                self.material("leaf_back", m.back, m.translucency, {**extra, "side": "back"}, back_img))
+            return self.material("leaf", m.front, m.translucency, extra, front_img, mask=mask, normal=front_nrm), None
+        return (self.material("leaf_front", m.front, m.translucency, {**extra, "side": "front"}, front_img,
+                              mask=mask, normal=front_nrm),
+                self.material("leaf_back", m.back, m.translucency, {**extra, "side": "back"}, back_img,
+                              mask=mask, normal=back_nrm))
 
     def mesh(self, path: str, pos: NDArray[np.float32], nrm: NDArray[np.float32], tris: NDArray[np.uint32],
              st: NDArray[np.float32] | None, material: str, *, back: bool = False, double_sided: bool = False) -> None:
@@ -263,7 +296,7 @@ def usd_layer(scene: ExportScene, path: str | Path, *, back_faces: str = "primit
     if not (np.isfinite(scene.length_m) and scene.length_m > 0):
         raise UsageError(f"length_m must be a positive number of metres, got {scene.length_m!r}")
     _, Sdf, Tf, _ = _pxr()
-    textures = scene_textures(scene) if textures is None else textures
+    textures = with_maps(scene, scene_textures(scene)) if textures is None else textures
     files = files or {}
     layer = Sdf.Layer.CreateNew(str(path))
     root_name = Tf.MakeValidIdentifier(scene.name or "leafview")
@@ -282,8 +315,11 @@ def usd_layer(scene: ExportScene, path: str | Path, *, back_faces: str = "primit
         instanced = []
         for k, (part, trs) in enumerate(zip(scene.parts, parts_trs(scene.parts))):
             sides = textures.of(k)
+            maps = maps_of(part)
             mats = w.leaf_materials(part, None if sides is None else
-                                    (files.get(sides[0], sides[0].name), files.get(sides[1], sides[1].name)))
+                                    (files.get(sides[0], sides[0].name), files.get(sides[1], sides[1].name)),
+                                    None if maps is None else (files.get(maps.normal, maps.normal.name),
+                                                               files.get(maps.back_normal, maps.back_normal.name)))
             ok = trs[3] <= TRS_TOLERANCE
             if len(part.matrices) >= 2 and ok.sum() >= 2:
                 instanced.append((part, mats, trs))
@@ -309,7 +345,7 @@ def write_usd(scene: ExportScene, path: str | Path, *, back_faces: str = "primit
     if path.suffix.lower() not in (".usda", ".usdc", ".usd"):
         raise UsageError(f"{path}: a USD file ends in .usda, .usdc or .usd")
     check_target(path)
-    textures = scene_textures(scene)       # every image read and checked before anything is written
+    textures = with_maps(scene, scene_textures(scene))   # every image read and checked before anything is written
     with outputs(), atomic_output(path) as tmp:
         files = write_images(textures, path.parent)
         layer = usd_layer(scene, tmp, back_faces=back_faces, textures=textures, files=files)
