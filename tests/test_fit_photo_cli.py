@@ -146,7 +146,7 @@ def test_the_fit_bench_fills_its_table(gl):
     assert res["photos"] == len(res["rows"]) == fit_photo.QUICK_PHOTOS and res["gl_renderer"]
     ok = [r for r in res["rows"] if "error" not in r]
     assert ok and all(0.5 < r["iou"] <= 1.0 for r in ok) and res["iou_worst"] <= res["iou_median"]
-    assert res["photos_per_s"] > 0.0 and set(res["stage_ms"]) == {"read", "outline", "fit", "texture", "measures"}
+    assert res["photos_per_s"] > 0.0 and set(res["stage_ms"]) == {"read", "outline", "fit", "texture", "veins", "measures"}
     assert res["photos_per_s_pooled"] > 0.0 and res["pooled_failed"] == res["failed"] and "processes" in fit_photo.format_table(res)
     json.dumps(res, allow_nan=False)
     table = fit_photo.format_table(res)

@@ -26,6 +26,9 @@
    the photo's dots per inch (from the file, or ``dpi=``) give ``transform.scale``, the leaf's
    length in metres. Without a resolution the leaf is 1 unit long, with a warning.
 5. **Texture** (:func:`leafview.fit.photo_texture.leaf_texture`).
+6. **Veins** (:func:`leafview.fit.photo_veins.detect_veins`): where the texture shows a pinnate
+   vein tree, its secondaries' angle, curvature, count, spacing and loops become the leaf's
+   ``venation`` (enabled); where it does not, the venation stays off and the report says why.
 
 The report measures the fit against the traced leaf: the IoU of the fitted top view with the
 blade mask, the Hausdorff distance between fitted margin and outline, and per silhouette row the
@@ -53,6 +56,7 @@ from leafview.errors import ParamError
 from leafview.fit.blas import single_threaded
 from leafview.fit.photo_outline import LeafOutline, Photo, as_photo, leaf_outline
 from leafview.fit.photo_texture import leaf_texture
+from leafview.fit.photo_veins import detect_veins, with_veins
 
 __all__ = ["ImageFit", "fit_image", "canonical_frame", "outline_sides", "margin_pixels", "polygon_mask",
            "top_view_iou", "PHOTO_FIT_TARGET", "HALVES_AREA_GAIN", "METRES_PER_INCH", "MIN_LENGTH_PX", "DPI_RANGE"]
@@ -312,7 +316,10 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
         row: RMS % of the length), ``asymmetric`` (two halves), ``sides_differ`` (two halves
         would follow the photo clearly better), ``symmetric_error_pct``,
         ``halves_error_pct``, ``petiole_length``, ``dpi``, ``scale``, ``cut_sides``, ``method``,
-        ``warnings``, ``seconds`` and ``stage_seconds`` (read, outline, fit, texture, measures).
+        ``warnings``, ``veins`` (:meth:`leafview.fit.photo_veins.VeinEstimate.report`: ``status``
+        ``pinnate`` with the numbers given to ``venation``, or ``not visible`` and the
+        ``reason``), ``seconds`` and ``stage_seconds`` (read, outline, fit, texture, veins,
+        measures).
 
     Raises
     ------
@@ -373,6 +380,9 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
     t3 = time.perf_counter()
     texture = leaf_texture(photo.rgb, traced.mask, parts, pixel_from_leaf, texture_size)
     t4 = time.perf_counter()
+    veins = detect_veins(texture, parts)
+    parts = with_veins(parts, veins)
+    t_veins = time.perf_counter()
 
     m_right, m_left = _margins(parts, _MARGIN_SAMPLES)
     fitted_outline = np.vstack([m_right, m_left[-2:0:-1], m_right[:1]])
@@ -401,10 +411,12 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
         "cut_sides": list(traced.cut_sides),
         "method": traced.method,
         "warnings": warnings,
+        "veins": veins.report(),
         "seconds": 0.0,
     }
     t5 = time.perf_counter()
     report["seconds"] = round(t5 - t0, 4)
     report["stage_seconds"] = {"read": round(t1 - t0, 4), "outline": round(t2 - t1, 4), "fit": round(t3 - t2, 4),
-                               "texture": round(t4 - t3, 4), "measures": round(t5 - t4, 4)}
+                               "texture": round(t4 - t3, 4), "veins": round(t_veins - t4, 4),
+                               "measures": round(t5 - t_veins, 4)}
     return ImageFit(parts, texture, traced, frame, report, tuple(warnings), photo)

@@ -6,12 +6,14 @@ pressed flat (its margin ``evaluate(params, ±1, v)``; Chaurasia & Beardsley 201
 preset's jitter of sec. 6) or a random catalogue shape (Garg & Leow 2011, Fig. 8; asymmetric ones
 from two shapes' sides, Fig. 6), optionally toothed, with an optional petiole. :func:`arrange`
 draws the leaves of one photo and places them on the page: the primary one (optionally running off
-a border), a second one overlapping it when asked, and the others in free spots.
+a border), a second one overlapping it when asked, and the others in free spots. :func:`tree_veins`
+draws a known vein tree (:func:`leafview.botany.venation.vein_tree`) over a preset leaf's pixels.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import cache
 from typing import Any
@@ -19,9 +21,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 from leafview.botany.catalogue import catalogue, catalogue_names, combine_sides, landmark_leaf, random_instance
 from leafview.botany.landmarks import LandmarkLeaf, check_margin, outline_sides
+from leafview.botany.venation import Vein
 from leafview.core.io import load_params
 from leafview.core.params import Jitter, LeafParams
 from leafview.deform.surface import evaluate
@@ -35,6 +39,8 @@ KINDS = ("preset", "landmark", "serrated", "asymmetric")
 SUPERSAMPLE = 4              # sub-rows per pixel row in :func:`coverage` (the x extent is exact)
 _MARGIN = 0.04               # free border kept round a leaf that is not cut, in shorter sides
 _NAMED = tuple(e.name for e in catalogue() if e.named)
+VEINED_PRESETS = ("acuminate", "beech", "elliptic", "lanceolate", "oblanceolate", "oblong", "obovate", "ovate",
+                  "rhomboidal", "serrate")   # broad pinnate blades for photos with a known vein tree
 _SHAPES = ("elliptic", "lanceolate", "oblanceolate", "rhomboidal", "oval", "ovate", "obovate", "oblong", "deltoid")
 
 
@@ -50,6 +56,7 @@ class TopView:
     left: Arr           # (n, 2) the other margin, base to apex
     axis: Arr           # (k, 2) the midrib, base to apex
     info: dict[str, Any]
+    params: LeafParams | None = None    # the flattened preset whose top view this is (preset views only)
 
     @property
     def outline(self) -> Arr:
@@ -84,7 +91,7 @@ def _preset_view(rng: np.random.Generator, name: str, serrate: bool) -> TopView:
     v = np.linspace(0.0, 1.0, n)
     right, left = evaluate(p, 1.0, v)[:, :2], evaluate(p, -1.0, v)[:, :2]
     axis = evaluate(p, 0.0, np.linspace(0.0, 1.0, 65))[:, :2]
-    return TopView(right, left, axis, info)
+    return TopView(right, left, axis, info, p)
 
 
 def _landmark_leaf(rng: np.random.Generator, asymmetric: bool) -> tuple[LandmarkLeaf, str]:
@@ -138,9 +145,13 @@ def _landmark_view(rng: np.random.Generator, asymmetric: bool, serrate: bool) ->
     return TopView(right, left, axis, info)
 
 
-def _top_view(rng: np.random.Generator, kind: str) -> TopView:
+def _top_view(rng: np.random.Generator, kind: str, veined: bool = False) -> TopView:
+    """A random top view of ``kind``; ``veined``: a preset's (serrated or not, as ``kind`` says) of
+    :data:`VEINED_PRESETS` at its own width, so that the preset's vein tree lies on it exactly."""
     presets = sorted(builtin_presets())
-    if kind == "preset":
+    if veined:
+        view = _preset_view(rng, str(rng.choice(VEINED_PRESETS)), kind == "serrated")
+    elif kind == "preset":
         view = _preset_view(rng, str(rng.choice(presets)), False)
     elif kind == "landmark":
         view = _landmark_view(rng, False, False)
@@ -150,8 +161,11 @@ def _top_view(rng: np.random.Generator, kind: str) -> TopView:
         view = (_preset_view(rng, str(rng.choice(presets)), True) if rng.random() < 0.5
                 else _landmark_view(rng, bool(rng.random() < 0.3), True))
     width = float(rng.uniform(0.8, 1.2))          # x only: base and apex stay where they are
+    if veined:
+        width = 1.0
     k = np.array([width, 1.0])
-    return TopView(view.right * k, view.left * k, view.axis * k, {**view.info, "kind": kind, "width_factor": width})
+    return TopView(view.right * k, view.left * k, view.axis * k, {**view.info, "kind": kind, "width_factor": width},
+                   view.params)
 
 
 def _petiole(rng: np.random.Generator) -> tuple[Arr, float]:
@@ -208,6 +222,46 @@ def coverage(poly: Arr, height: int, width: int, sub: int = SUPERSAMPLE) -> tupl
     cov = np.cumsum(acc.reshape(ns, nc + 2), axis=1)[:, :nc]
     cov = np.minimum(np.abs(cov, out=cov), 1.0, out=cov)
     return r0, c0, np.asarray(cov.reshape(nr, sub, nc).mean(axis=1, dtype=np.float32), dtype=np.float32)
+
+
+def tree_veins(leaf: Placed, crop: tuple[int, int, F32], veins: Sequence[Vein],
+               strength: tuple[float, float, float] = (1.0, 0.85, 0.3)) -> F32:
+    """The veins of a known vein tree drawn over the blade's ``crop`` (row0, col0, coverage): per
+    crop pixel 0..1, a Gaussian across each vein (its half-width from ``Vein.width``, at least
+    0.8 px, its strength cut in proportion below that) times ``strength`` of its order (midrib,
+    secondaries, tertiaries), the strongest vein winning. ``veins`` are in the (u, v) of
+    ``leaf.view.params`` (:func:`leafview.botany.venation.vein_tree`), placed on its flat top
+    view (:func:`leafview.deform.surface.evaluate`) and in the photo by ``leaf.px``."""
+    params = leaf.view.params
+    r0, c0, cov = crop
+    out = np.zeros(cov.shape, np.float32)
+    if params is None or not veins or not cov.size:
+        return out
+    rows, cols = np.nonzero(cov > 0.0)
+    pixels = np.stack([cols + c0, rows + r0], axis=1).astype(np.float64)
+    flat = out.reshape(-1)
+    at_pixel = rows * cov.shape[1] + cols
+    for order in (1, 2, 3):                       # one tree per order: a fine vein never hides a coarse one
+        points, half = [], []
+        for vein in veins:
+            if min(max(vein.order, 1), 3) != order:
+                continue
+            px = leaf.px(evaluate(params, vein.uv[:, 0], vein.uv[:, 1])[:, :2])
+            arc = np.r_[0.0, np.cumsum(np.hypot(*np.diff(px, axis=0).T))]
+            at = np.linspace(0.0, arc[-1], max(int(arc[-1] / 0.3) + 2, 2))   # a point every 0.3 px at most
+            points.append(np.stack([np.interp(at, arc, px[:, 0]), np.interp(at, arc, px[:, 1])], axis=1))
+            half.append(np.full(len(at), 0.5 * vein.width * leaf.length))
+        if not points:
+            continue
+        hw = np.concatenate(half)
+        d, i = cKDTree(np.concatenate(points)).query(pixels, distance_upper_bound=3.0 * max(float(hw.max()), 0.8))
+        near = np.isfinite(d)
+        w = hw[i[near]]
+        eff = np.maximum(w, 0.8)
+        s = (np.exp(-(d[near] / eff) ** 2) * (w / eff) * strength[order - 1]).astype(np.float32)
+        hit = at_pixel[near]                      # distinct pixels: a plain gather and scatter
+        flat[hit] = np.maximum(flat[hit], s)
+    return out
 
 
 def paste(crop: tuple[int, int, F32], height: int, width: int) -> F32:
@@ -375,14 +429,15 @@ def _free_spot(rng: np.random.Generator, leaf: Placed, occupied: NDArray[np.bool
 
 
 def arrange(rng: np.random.Generator, n: int, kind: str, petiole: bool | None, size: tuple[int, int],
-             touching: bool, cut: str | None) -> tuple[list[Placed], dict[str, Any]]:
+             touching: bool, cut: str | None, veined: bool = False) -> tuple[list[Placed], dict[str, Any]]:
     """Draw ``n`` leaves (the first of ``kind``, the others of any kind) and place them on a page of
     ``size`` (width, height): the primary leaf (running off the ``cut`` border, if any), with
     ``touching`` a second one overlapping it, the rest clear of each other. Returns them and the
-    layout's truth (cut, how far it runs off, touching, overlap)."""
+    layout's truth (cut, how far it runs off, touching, overlap). ``veined``: the primary leaf is
+    a preset's top view that a vein tree can be drawn on (see :func:`_top_view`)."""
     leaves: list[Placed] = []
     for i in range(n):
-        view = _top_view(rng, kind if i == 0 else str(rng.choice(KINDS)))
+        view = _top_view(rng, kind if i == 0 else str(rng.choice(KINDS)), veined and i == 0)
         has_petiole = bool(rng.random() < 0.5) if petiole is None else petiole
         pet, plen = _petiole(rng) if has_petiole else (None, 0.0)
         leaves.append(Placed(view, pet, plen, 0.0, 1.0, np.zeros(2)))

@@ -12,6 +12,9 @@
   about half the leaves with a slightly curved petiole (5-25 % of the length);
 * **texture**: a base-to-apex colour gradient, a midrib and curved secondary veins, a reticulate
   tertiary net and mottling; an underside (``face_down``) is paler with raised, embossed veins;
+  with ``veins="tree"`` the primary leaf's veins come from a known pinnate vein tree instead
+  (:func:`leafview.botany.venation.vein_tree` on the preset, lighter or darker than the blade),
+  with ``veins="none"`` there are none;
 * **paper**: white, cream, light blue, grey or pink (never green), grain, uneven illumination
   (vignetting and a gradient), a soft drop shadow and non-green debris (specks, crumbs, hairs)
   kept clear of the leaves;
@@ -31,7 +34,7 @@ import json
 import math
 import os
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -41,9 +44,13 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from leafview.atomic import atomic_output, outputs, write_text
+from leafview.botany.venation import Vein, check_veins, vein_tree
+from leafview.core.params import LeafParams
+from leafview.core.venation import Venation, venation_dict
+from leafview.deform.surface import evaluate
 from leafview.errors import ImageWriteError, ParamError
 from leafview.fit.blas import single_threaded
-from leafview.fit.synthetic_leaf import F32, KINDS, Arr, Placed, area_mask, arrange, coverage, paste
+from leafview.fit.synthetic_leaf import F32, KINDS, Arr, Placed, area_mask, arrange, coverage, paste, tree_veins
 from leafview.fit.synthetic_leaf import SUPERSAMPLE as SUPERSAMPLE  # re-exported: coverage's default
 from leafview.fit.synthetic_surfaces import (
     BACKGROUNDS,
@@ -54,10 +61,15 @@ from leafview.fit.synthetic_surfaces import (
     scatter_debris,
 )
 
-__all__ = ["BACKGROUNDS", "CUTS", "KINDS", "SyntheticPhoto", "coverage", "synthetic_photo", "write_photo",
+__all__ = ["BACKGROUNDS", "CUTS", "KINDS", "VEINS", "SyntheticPhoto", "coverage", "synthetic_photo", "write_photo",
            "write_photo_set"]
 
 CUTS = ("left", "right", "top", "bottom")
+VEINS = ("procedural", "tree", "none")
+"""How the veins are drawn: ``procedural`` (curved secondaries from a random field, no vein tree:
+the benchmark's photos), ``tree`` (the primary leaf's veins from a known pinnate vein tree,
+:func:`leafview.botany.venation.vein_tree`, lighter or darker than the blade; ``truth["veins"]``
+holds its parameters) or ``none`` (a plain blade)."""
 
 
 @dataclass(frozen=True)
@@ -74,7 +86,10 @@ class SyntheticPhoto:
     ``truth`` is JSON-able: the seed, the leaf (``kind``, ``name``, ``rotation_deg``: the apex
     direction turned clockwise from straight up, ``scale``: length / shorter side, width factor,
     serration), the paper, shadow, debris and camera settings, ``dpi`` and ``leaf_cm``, and
-    ``others`` (the other leaves' outlines, bases and apexes) when there are several."""
+    ``others`` (the other leaves' outlines, bases and apexes) when there are several. With
+    ``veins="tree"``, ``secondaries`` are the primary leaf's secondary veins leaving the midrib
+    (pixel polylines from the midrib out) and ``secondary_sides`` their sides (-1 the u < 0 half,
+    +1 the other), and ``truth["veins"]`` their tree's parameters."""
 
     image: NDArray[np.uint8]
     mask: NDArray[np.bool_]
@@ -88,6 +103,8 @@ class SyntheticPhoto:
     face_down: bool
     truth: dict[str, Any]
     all_leaves: NDArray[np.bool_]
+    secondaries: tuple[Arr, ...] = ()
+    secondary_sides: tuple[int, ...] = ()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -148,7 +165,8 @@ MAX_PIXELS = 50_000_000
 
 
 def _check_options(seed: int, size: tuple[int, int], kind: str | None, background: str | None,
-                   jpeg_quality: int | None, leaves: int, touching: bool, cut: str | None, empty: bool) -> None:
+                   jpeg_quality: int | None, leaves: int, touching: bool, cut: str | None, empty: bool,
+                   veins: str) -> None:
     def integer(value: Any) -> bool:
         return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
 
@@ -171,6 +189,11 @@ def _check_options(seed: int, size: tuple[int, int], kind: str | None, backgroun
         raise ParamError("cut", "cannot be combined with touching")
     if empty and (touching or cut is not None or leaves != 1):
         raise ParamError("empty", "an empty page has no leaves: leave touching, cut and leaves unset")
+    if veins not in VEINS:
+        raise ParamError("veins", f"must be one of {', '.join(VEINS)}, got {veins!r}")
+    if veins == "tree" and (empty or kind not in (None, "preset", "serrated")):
+        raise ParamError("veins", "a vein tree is drawn on a preset's leaf: kind must be preset, serrated or unset, "
+                                  "and the page not empty")
 
 
 def _leaf_truth(leaf: Placed) -> dict[str, Any]:
@@ -181,11 +204,60 @@ def _leaf_truth(leaf: Placed) -> dict[str, Any]:
             "apex": leaf.px(np.array([0.0, 1.0])).tolist()}
 
 
+def _vein_tree(seed: int, leaf: Placed) -> tuple[list[Vein], LeafParams, dict[str, Any]]:
+    """A random pinnate venation on the primary leaf (from the stream ``(seed, 17)``, apart from the
+    photo's own) and its vein tree on the leaf's flat preset; the truth: its parameters, whether
+    the veins are darker than the blade, and the secondaries leaving the midrib on each side."""
+    rng = np.random.default_rng([seed, 17])
+    if leaf.view.params is None:
+        raise ParamError("veins", "a vein tree is drawn on a preset's leaf")
+    for _ in range(20):
+        loop = float(rng.uniform(0.65, 0.9)) if rng.random() < 0.4 else 0.0
+        venation = Venation(enabled=True, pattern="pinnate", seed=int(rng.integers(0, 10_000)),
+                            secondaries=int(rng.integers(5, 13)), angle=float(rng.uniform(30.0, 70.0)),
+                            curvature=float(rng.uniform(0.0, 0.6)), irregularity=float(rng.uniform(0.0, 0.3)),
+                            alternate=float(rng.uniform(0.0, 1.0)), loop=loop, tertiary=float(rng.uniform(0.0, 30.0)),
+                            midrib_width=float(rng.uniform(0.006, 0.014)), width_ratio=float(rng.uniform(0.35, 0.6)))
+        params = leaf.view.params.replace(venation=venation)
+        try:
+            check_veins(params)
+        except ParamError:
+            continue
+        break
+    tree = vein_tree(params)
+    sides = [int(np.sign(vein.uv[-1, 0])) for vein in tree if vein.order == 2 and vein.parent == 0]
+    info = {"mode": "tree", "dark": bool(rng.random() < 0.35), "venation": venation_dict(venation),
+            "secondaries_per_side": {"-1": sides.count(-1), "+1": sides.count(1)}}
+    return tree, params, info
+
+
+def _secondaries(leaf: Placed, tree: list[Vein]) -> tuple[tuple[Arr, ...], tuple[int, ...]]:
+    """The secondaries of ``tree`` that leave the midrib, as pixel polylines, and their sides. A
+    looping vein is given up to where its loop begins (the vein of the tree without loops cut at
+    ``loop`` of its length), without the arch that joins it to the next."""
+    params = leaf.view.params
+    if not tree or params is None:
+        return (), ()
+    venation = params.venation
+    if venation.loop > 0.0:
+        tree = vein_tree(params.replace(venation=replace(venation, loop=0.0)))
+    picked = [v for v in tree if v.order == 2 and v.parent == 0]
+    lines = []
+    for v in picked:
+        px = leaf.px(evaluate(params, v.uv[:, 0], v.uv[:, 1])[:, :2])
+        if venation.loop > 0.0:
+            arc = np.r_[0.0, np.cumsum(np.hypot(*np.diff(px, axis=0).T))]
+            at = np.linspace(0.0, venation.loop * arc[-1], max(len(px), 2))
+            px = np.stack([np.interp(at, arc, px[:, 0]), np.interp(at, arc, px[:, 1])], axis=1)
+        lines.append(px)
+    return tuple(lines), tuple(int(np.sign(v.uv[-1, 0])) for v in picked)
+
+
 @single_threaded
 def synthetic_photo(seed: int, *, size: tuple[int, int] = (1000, 1000), kind: str | None = None,
                     background: str | None = None, petiole: bool | None = None, jpeg_quality: int | None = None,
                     leaves: int = 1, touching: bool = False, cut: str | None = None,
-                    empty: bool = False) -> SyntheticPhoto:
+                    empty: bool = False, veins: str = "procedural") -> SyntheticPhoto:
     """One seeded synthetic photo of a leaf on paper (see the module docstring).
 
     Parameters
@@ -212,17 +284,24 @@ def synthetic_photo(seed: int, *, size: tuple[int, int] = (1000, 1000), kind: st
         10-25 % of its length (measured across the border); base or apex may lie outside.
     empty : bool
         Paper, debris and camera only: no leaf, no shadow.
+    veins : str
+        ``procedural``, ``tree`` or ``none`` (:data:`VEINS`). With ``tree`` the primary leaf is a
+        broad preset at its own width (serrated with ``kind="serrated"``) carrying a random
+        pinnate :class:`~leafview.core.venation.Venation` drawn from a second stream of the seed,
+        so the other draws stay as they are.
     """
-    _check_options(seed, size, kind, background, jpeg_quality, leaves, touching, cut, empty)
+    _check_options(seed, size, kind, background, jpeg_quality, leaves, touching, cut, empty, veins)
     rng = np.random.default_rng(int(seed))
     w, h = int(size[0]), int(size[1])
     # drawn whatever the options, so that an option changes only what it names
     drawn_kind, drawn_paper, drawn_quality = str(rng.choice(KINDS)), str(rng.choice(list(BACKGROUNDS))), int(
         rng.integers(70, 86))
+    if veins == "tree" and kind is None:
+        kind = drawn_kind if drawn_kind in ("preset", "serrated") else "preset"
     kind, background = kind or drawn_kind, background or drawn_paper
     quality = drawn_quality if jpeg_quality is None else int(jpeg_quality)
     n = 0 if empty else max(leaves, 2 if touching else 1)
-    placed, layout = arrange(rng, n, kind, petiole, (w, h), touching, cut) if n else ([], {})
+    placed, layout = arrange(rng, n, kind, petiole, (w, h), touching, cut, veins == "tree") if n else ([], {})
     faces = [bool(rng.random() < 0.3) for _ in placed]
 
     albedo, grain, paper_info = paper_surface(rng, h, w, background)
@@ -249,8 +328,13 @@ def synthetic_photo(seed: int, *, size: tuple[int, int] = (1000, 1000), kind: st
     reach = 2 + int(((shadow_info or {}).get("blur_px", 0.0) * 2 + 6) / cell)
     keepout = ndimage.binary_dilation(coarse, iterations=reach) if n else coarse
     debris = scatter_debris(rng, img, keepout, cell, light, cast)
-    for leaf, blade, stalk, down in zip(placed, blades, stalks, faces, strict=True):
-        rgb, idx, stalk_rgb = leaf_rgb(rng, leaf, blade, down)
+    tree, tree_params, vein_info = (_vein_tree(int(seed), placed[0]) if veins == "tree"
+                                    else (None, None, {"mode": veins}))
+    for i, (leaf, blade, stalk, down) in enumerate(zip(placed, blades, stalks, faces, strict=True)):
+        drawn = (np.zeros_like(blade[2]) if veins == "none" else
+                 tree_veins(leaf, blade, tree) if tree is not None and i == 0 else None)
+        rgb, idx, stalk_rgb = leaf_rgb(rng, leaf, blade, down, veins_drawn=drawn,
+                                       dark_veins=bool(vein_info.get("dark", False)) and i == 0)
         if stalk is not None:
             r0, c0, a = stalk
             sl = np.s_[r0:r0 + a.shape[0], c0:c0 + a.shape[1]]
@@ -267,7 +351,7 @@ def synthetic_photo(seed: int, *, size: tuple[int, int] = (1000, 1000), kind: st
 
     short = min(w, h)
     truth: dict[str, Any] = {"seed": int(seed), "size": [w, h], "empty": empty, "leaves": n, **layout,
-                             **paper_info, "illumination": light_info, "shadow": shadow_info, "debris": debris,
+                             **paper_info, "veins": vein_info, "illumination": light_info, "shadow": shadow_info, "debris": debris,
                              **camera}
     if not n:
         nan = np.full(2, np.nan)
@@ -287,9 +371,10 @@ def synthetic_photo(seed: int, *, size: tuple[int, int] = (1000, 1000), kind: st
     if n > 1:
         truth["others"] = [{**_leaf_truth(p), "face_down": f, "outline": np.round(p.px(p.view.outline), 3).tolist()}
                            for p, f in zip(placed[1:], faces[1:], strict=True)]
+    lines, sides = _secondaries(replace(first, view=replace(first.view, params=tree_params)), tree) if tree else ((), ())
     return SyntheticPhoto(image, mask >= 0.5, paste(blades[0], h, w) >= 0.5, first.px(first.view.outline),
                           first.px(np.zeros(2)), first.px(np.array([0.0, 1.0])), float(first.length),
-                          float(first.petiole_len * first.length), dpi, faces[0], truth, alpha >= 0.5)
+                          float(first.petiole_len * first.length), dpi, faces[0], truth, alpha >= 0.5, lines, sides)
 
 
 # ---------------------------------------------------------------------------------------------

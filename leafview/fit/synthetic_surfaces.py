@@ -96,11 +96,15 @@ def _ramp(x: F32, lo: float, hi: float) -> F32:
     return np.clip(out, 0.0, 1.0, out=out)
 
 
-def leaf_rgb(rng: np.random.Generator, leaf: Placed, crop: tuple[int, int, F32],
-              face_down: bool) -> tuple[F32, NDArray[np.intp], Arr]:
+def leaf_rgb(rng: np.random.Generator, leaf: Placed, crop: tuple[int, int, F32], face_down: bool, *,
+             veins_drawn: F32 | None = None, dark_veins: bool = False) -> tuple[F32, NDArray[np.intp], Arr]:
     """The blade's colour (3, k) at the k pixels of its crop that it covers (their flat indices
     into the crop, in order): gradient, mottling, veins, spots; and the petiole's colour. Colours
-    are planar (one row per channel) so that every operation runs along the pixels."""
+    are planar (one row per channel) so that every operation runs along the pixels.
+
+    ``veins_drawn`` (the crop's shape, 0..1) replaces the procedural veins by given ones (a known
+    vein tree, :func:`leafview.fit.synthetic_leaf.tree_veins`; zeros: no veins), drawn darker than
+    the blade with ``dark_veins``; the random numbers drawn stay the same."""
     r0, c0, cov = crop
     h, w = cov.shape
     pal = _palette(rng, face_down)
@@ -144,6 +148,9 @@ def leaf_rgb(rng: np.random.Generator, leaf: Placed, crop: tuple[int, int, F32],
     veins = np.maximum(np.maximum(vm, 0.85 * vs), 0.22 * vt)
     # the blade between two secondaries bulges a little: lighter in the middle of each band
     bands = 1.0 + np.float32(rng.uniform(0.0, 0.06)) * np.cos(np.float32(2.0 * math.pi) * phase)
+    if veins_drawn is not None:
+        veins, bands = veins_drawn.ravel()[idx], np.ones_like(bands)
+    vein_rgb = _col(pal["base"] * 0.45 if dark_veins else pal["vein"])
     rim = (1.0 - 0.15 * (1.0 - _ramp(edge, 0.0, 2.5))) * bands
 
     if face_down:
@@ -154,12 +161,12 @@ def leaf_rgb(rng: np.random.Generator, leaf: Placed, crop: tuple[int, int, F32],
         gy, gx = np.gradient(plane.reshape(h, w))
         light = float(rng.uniform(0.0, 2.0 * math.pi))
         emboss = 1.0 + 0.35 * (gx.ravel()[idx] * math.cos(light) + gy.ravel()[idx] * math.sin(light))
-        rgb += (_col(pal["vein"]) - rgb) * (contrast * veins)
+        rgb += (vein_rgb - rgb) * (contrast * veins)
         rgb *= emboss
     else:
         contrast = float(rng.uniform(0.3, 0.6))
         rgb *= (1.0 + mottle) * rim
-        rgb += (_col(pal["vein"]) - rgb) * (contrast * veins)
+        rgb += (vein_rgb - rgb) * (contrast * veins)
         gloss = np.clip(_field(rng, h, w, (big / 3.0, 1.0)).ravel()[idx], 0.0, None) ** 2
         rgb += float(rng.uniform(0.0, 0.06)) * gloss
     if rng.random() < 0.3:                       # a few brown spots (the leaf stays the leaf)
