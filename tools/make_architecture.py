@@ -67,7 +67,7 @@ LAYERS: list[tuple[str, str]] = [
     ("leafview.inputs", "the one reader of input files: type, size, nesting"),
 ]
 BASE_MODULES = ("leafview.errors", "leafview.atomic", "leafview.resources", "leafview._version")
-API_MODULES = ("leafview", "leafview.landmarks", "leafview.shapes", "leafview.beam")
+API_MODULES = ("leafview", "leafview.landmarks", "leafview.shapes", "leafview.beam", "leafview.venation")
 ORDER = [API] + [name for name, _ in LAYERS] + [BASE]
 ROLES = dict(LAYERS) | {API: "for users, not a layer: nothing inside imports it",
                         BASE: "atomic imports errors; nothing else of leafview"}
