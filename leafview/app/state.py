@@ -207,6 +207,11 @@ class ViewerState:
         self._set(new)
         return True
 
+    @property
+    def in_gesture(self) -> bool:
+        """True while a continuous interaction (a slider being dragged) is under way."""
+        return self._gesture is not None
+
     def end_gesture(self) -> None:
         """Close the current continuous interaction: the next edit starts a new undo step."""
         self._gesture = None

@@ -266,16 +266,20 @@ class Viewer:
     def _upload(self) -> None:
         """Upload the leaf if it changed since the last frame (uniform block only); rebuild the
         overlay's vertices if the leaf or the ground placement changed. Toggling the veins checkbox
-        uploads the leaf again, with or without its vein layer."""
+        uploads the leaf again, with or without its vein layer. During a drag the veins stay as
+        they were at its start and are rebuilt in the first frame after it ends."""
         state = self.state
         assert self.renderer is not None and self.overlay is not None
         self.last_upload_bytes = 0
         if state.revision != self._uploaded or self.renderer.veins != state.view.show_veins:
             before = self.renderer.uploads
             self.renderer.veins = state.view.show_veins   # the veins checkbox (--veins on|off)
-            self.renderer.set_leaf(state.params)
+            # while a slider is dragged the veins follow at its release (rebuilding them takes 15-35 ms)
+            self.renderer.set_leaf(state.params, defer_veins=state.in_gesture)
             self.last_upload_bytes = self.renderer.uploads - before
             self._uploaded = state.revision
+        elif not state.in_gesture:
+            self.renderer.refresh_veins()
         center, z, half = self.ground
         self.overlay.update(state.params, state.revision, center, z, half)
 

@@ -132,6 +132,8 @@ class LeafRenderer:
                               int(self.ctx.info.get("GL_SHADER_STORAGE_BUFFER_OFFSET_ALIGNMENT", 256)))
         self.uploads = 0  # bytes written to GPU buffers/textures by set_leaf (for edit-cost tests)
         self.veins = True  # leaves whose venation is enabled show veins (False: none does)
+        self.veins_pending: LeafParams | None = None   # set_leaf(defer_veins=True)'s leaf, veins not rebuilt yet
+        self._vein_layer = -1
 
     # -- lifetime -------------------------------------------------------------------------------
     def release(self) -> None:
@@ -160,12 +162,16 @@ class LeafRenderer:
         return self.resources.prepare
 
     # -- state ----------------------------------------------------------------------------------
-    def set_leaf(self, params: LeafParams, *, textures: bool = True) -> None:
+    def set_leaf(self, params: LeafParams, *, textures: bool = True, defer_veins: bool = False) -> None:
         """Upload the leaf's uniform block (under 1 KiB), refresh its derived constants (one
         compute dispatch) and, if its seed changed, its jitter row; with ``textures``, its image
         textures when their files changed (a missing or unreadable one raises ParamError first).
 
-        Changing jitter amplitude or density only changes the block: nothing is rebuilt.
+        Changing jitter amplitude or density only changes the block: nothing is rebuilt. A shape
+        or venation edit rebuilds the leaf's vein tree, field and grid (15-35 ms on llvmpipe);
+        with ``defer_veins`` (the viewer, while a slider is dragged) the veins held stay in use,
+        a drag behind (they live in (u, v), so they still follow the blade), until
+        :meth:`refresh_veins`.
         """
         layers = (-1, -1)
         if textures and params.texture is not None:
@@ -176,14 +182,28 @@ class LeafRenderer:
             layers = (int(front), int(back))
         if params.ripple.enabled:  # re-synthesises only when seed or β changed
             self.ripples.update([(params.ripple.seed, params.ripple.beta)])
-        vein_layer = int(self.leaf_veins.update([params], enabled=self.veins)[0])   # rebuilt when the key changed
-        self.vein_tubes.update(params if self.veins else None)                      # rebuilt when the leaf changed
+        if defer_veins and self.veins and params.venation.enabled and self._vein_layer >= 0:
+            vein_layer = self._vein_layer          # the veins held, until refresh_veins
+            self.veins_pending = params
+        else:
+            vein_layer = int(self.leaf_veins.update([params], enabled=self.veins)[0])   # rebuilt when the key changed
+            self.vein_tubes.update(params if self.veins else None)                      # rebuilt when the leaf changed
+            self.veins_pending = None
+        self._vein_layer = vein_layer
         pack_leaf(params, self._leaf, layers=layers, vein_layer=vein_layer)
         self.leaf_ubo.write(self._leaf.tobytes())
         self.uploads += LEAF_BLOCK.nbytes
         self.prepare.run(self.leaf_ubo, 1)
         if params.jitter.enabled:
             self.uploads += self.jitter.set_seed(params.jitter)
+
+    def refresh_veins(self) -> bool:
+        """Bring the veins up to the leaf last given to :meth:`set_leaf` with ``defer_veins``;
+        False when they already were."""
+        if self.veins_pending is None:
+            return False
+        self.set_leaf(self.veins_pending)
+        return True
 
     def set_camera(self, camera: Camera, *, srgb: bool, flat: bool = False,
                    lighting: type[Lighting] = Lighting, size: tuple[int, int] | None = None) -> None:
