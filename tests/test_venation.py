@@ -11,6 +11,7 @@ from dataclasses import fields, replace
 import numpy as np
 import pytest
 
+from leafview.botany import vein_trace as T
 from leafview.botany import venation as V
 from leafview.botany.vein_field import vein_space
 from leafview.botany.venation import check_veins, edit_slots, edited_uv, vein_segments, vein_tree
@@ -44,9 +45,9 @@ def _inside(uv: np.ndarray) -> bool:
 
 def test_deterministic_for_a_seed_and_different_for_another(presets):
     p = _leaf(presets)
-    V._tree.cache_clear()
+    T.build_tree.cache_clear()
     a = vein_tree(p)
-    V._tree.cache_clear()
+    T.build_tree.cache_clear()
     b = vein_tree(p)
     assert len(a) == len(b)
     for x, y in zip(a, b):
@@ -85,7 +86,7 @@ def test_pinnate_angle_in_vein_space_and_count_per_side(presets):
         for v in sec:
             assert v.uv[0, 0] == pytest.approx(0.0, abs=1e-12)        # leaves the midrib
             assert abs(v.uv[-1, 0]) == 1.0                            # ends on the margin
-            if v.uv[0, 1] < V._BASAL_V:                               # basal ones open up (documented)
+            if T.basal_lift(v.uv[0, 1]) > 0:                         # basal ones open up (documented)
                 continue
             q = vein_space(p, v.uv)
             d = q[1:] - q[:-1]
@@ -189,7 +190,7 @@ def test_every_preset_has_veins_inside_its_blade_quickly(presets):
     for name, p in presets.items():
         assert p.venation.enabled, name
         check_veins(p)
-        V._tree.cache_clear()
+        T.build_tree.cache_clear()
         t = time.perf_counter()
         veins = vein_tree(p)
         worst = max(worst, time.perf_counter() - t)
