@@ -268,7 +268,12 @@ def test_cli_writes_every_format(gl, tmp_path, capsys):
 def test_cli_directory_of_presets(gl, tmp_path):
     out = tmp_path / "leaves"
     assert main(["export", "ovate", "holly", "maize", "-o", str(out), "--format", "usdc", "-q"]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["holly.usdc", "maize.usdc", "ovate.usdc"]
+    maps = [f"{name}_{kind}.png" for name in ("holly", "maize", "ovate")
+            for kind in ("back_basecolor", "back_normal", "basecolor", "normal")]   # the presets' veins, baked
+    assert sorted(p.name for p in out.iterdir()) == sorted(["holly.usdc", "maize.usdc", "ovate.usdc", *maps])
+    plain = tmp_path / "plain"
+    assert main(["export", "ovate", "holly", "-o", str(plain), "--format", "usdc", "--veins", "off", "-q"]) == 0
+    assert sorted(p.name for p in plain.iterdir()) == ["holly.usdc", "ovate.usdc"]
 
 
 @pytest.mark.parametrize("argv, message", [

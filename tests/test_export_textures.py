@@ -279,7 +279,7 @@ def test_image_names_come_from_the_files_and_stay_unique(tmp_path, ovate):
     # one run writing one file per leaf into one folder: two different images never share a name
     cli = tmp_path / "cli"
     assert main(["export", str(tmp_path / "a" / "leaf.leaf.json"), str(tmp_path / "b" / "leaf.leaf.json"),
-                 "-o", str(cli), "--format", "obj", "--backend", "numpy", "--quiet"]) == 0
+                 "-o", str(cli), "--format", "obj", "--backend", "numpy", "--veins", "off", "--quiet"]) == 0
     assert files(tmp_path) == ["a", "b", "cli", "out"]
     objs = sorted(cli.glob("*.obj"))
     assert len(objs) == 2 and len([n for n in files(cli) if n.endswith(".png")]) == 2

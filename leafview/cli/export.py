@@ -11,8 +11,10 @@ whole scene into ``-o FILE``.
 
 ``--mesh cdt`` exports presets as venation meshes instead of the (u, v) grid: a constrained
 Delaunay triangulation with the veins of order <= 2 as edges (:mod:`leafview.export.cdt`;
-``--max-area``, ``--min-angle``), and for a leaf with veins its baked vein textures
-(:mod:`leafview.export.vein_maps`: base colour and normal maps of both sides).
+``--max-area``, ``--min-angle``). Either mesh of a preset with its venation enabled carries the
+leaf's baked vein textures (:mod:`leafview.export.vein_maps`: base colour and normal maps of both
+sides, a photograph staying the base colour); ``--veins off`` leaves them out (the file is then
+the one of a leaf without venation). Scene files and leaf sets into one file carry none.
 Every input is validated before anything is baked; files are written atomically.
 """
 
@@ -45,7 +47,6 @@ from leafview.export import (
     DEFAULT_LENGTH_M,
     FORMATS,
     bake,
-    export_leaf,
     export_scene,
     format_of,
     write,
@@ -54,15 +55,16 @@ from leafview.export.cdt import DEFAULT_MAX_AREA, DEFAULT_MIN_ANGLE, bake_cdt, c
 from leafview.export.gltf import BACK_FACES, INSTANCING_MODES
 from leafview.export.mesh import BACKENDS, DEFAULT_RESOLUTION, check_resolution
 from leafview.export.objply import UP_AXES
-from leafview.export.scene import leaf_scene
+from leafview.export.scene import ExportScene
 from leafview.export.textures import check_textures
-from leafview.export.vein_maps import bake_vein_maps, vein_scene
+from leafview.export.vein_maps import VeinMaps, bake_vein_maps, vein_scene
 from leafview.scene.spec import build_scene, load_scene, scene_from_leaves
 
 __all__ = ["add_arguments", "run"]
 
 _FORMAT_NAMES = tuple(s.lstrip(".") for s in FORMATS)
 MESHES = ("grid", "cdt")
+VEINS = ("on", "off")
 
 
 def _resolution(text: str) -> tuple[int, int]:
@@ -117,6 +119,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-angle", type=_min_angle, default=None, metavar="DEG",
                         help=f"cdt: smallest angle away from sharper input angles (default {DEFAULT_MIN_ANGLE:g}; "
                              "at most 33)")
+    parser.add_argument("--veins", choices=VEINS, default="on",
+                        help="on: a preset with venation gets its baked vein textures, base colour and "
+                             "normal maps (default); off: none")
     parser.add_argument("--backend", choices=BACKENDS, default="gpu",
                         help="gpu: vertices read back from the rendering shader (default); numpy: the "
                              "float64 reference (no OpenGL needed)")
@@ -265,28 +270,43 @@ def _run(args: argparse.Namespace) -> int:
     # one safe, unique file name per leaf: never outside -o DIR, never one over another
     files = output_names(names, quiet=args.quiet) if mode == "dir" else names
     opts = _options(args, fmt)
-    common = {"resolution": args.resolution, "backend": args.backend, "length_m": args.length_m}
+    suffix = next(s for s, f in FORMATS.items() if f == fmt)
+    targets = [out] if mode == "file" else [out / f"{name}{suffix}" for name in files]
+    for target in targets:
+        check_target(target)                                  # a folder that cannot take it: before the bake
+    check_textures([(name or "leaf", leaf.texture) for name, leaf in zip(names, leaves)])   # a missing image too
     if mode == "file":
-        check_textures([(names[0] or "leaf", leaves[0].texture)])   # a missing image: refused before the bake
-        mesh = bake(leaves[0], args.resolution, backend=args.backend)
-        write(leaf_scene(leaves[0], mesh, length_m=args.length_m), out, **opts)
+        scene = _grid_scene(args, leaves[0])
+        write(scene, out, **opts)
         if not args.quiet:
-            print(f"wrote {out} ({names[0]}, {mesh.n_vertices} vertices, {mesh.n_triangles} triangles, "
+            mesh, maps = scene.parts[0].mesh, scene.parts[0].vein_maps
+            textures = "" if maps is None else f", {len(maps.images)} vein textures"
+            print(f"wrote {out} ({names[0]}, {mesh.n_vertices} vertices, {mesh.n_triangles} triangles{textures}, "
                   f"{_file_size(out)}) in {time.perf_counter() - started:.1f} s")
         return EXIT_OK
-    suffix = next(s for s, f in FORMATS.items() if f == fmt)
-    written: list[Path] = []
-    bar = progress_bar(total=len(leaves), unit="leaf", desc="exporting", quiet=args.quiet)
-    try:
-        with outputs():        # every file or none: a failure leaves no half-finished directory behind
-            for leaf, name in zip(leaves, files):
-                written.append(export_leaf(leaf, out / f"{name}{suffix}", **common, **opts))
-                bar.update(1)
-    finally:
-        bar.close()
+    with progress_bar(total=len(leaves), unit="leaf", desc="baking", quiet=args.quiet) as bar:
+        baked = []
+        for leaf in leaves:    # everything baked (PNGs encoded) before the transaction stages a file
+            baked.append(_grid_scene(args, leaf))
+            bar.update(1)
+    with outputs():            # every file or none: a failure leaves no half-finished directory behind
+        for part, target in zip(baked, targets):
+            write(part, target, **opts)
     if not args.quiet:
-        print(f"wrote {len(written)} {fmt} files to {out}/ in {time.perf_counter() - started:.1f} s")
+        print(f"wrote {len(targets)} {fmt} files to {out}/ in {time.perf_counter() - started:.1f} s")
     return EXIT_OK
+
+
+def _maps(args: argparse.Namespace, leaf: LeafParams) -> VeinMaps | None:
+    """The leaf's baked vein textures, or None (``--veins off``, or its venation is off)."""
+    return bake_vein_maps(leaf) if args.veins == "on" else None
+
+
+def _grid_scene(args: argparse.Namespace, leaf: LeafParams) -> ExportScene:
+    """One leaf's (u, v) grid mesh and vein textures, placed by its transform (PNGs encoded here,
+    before the writer stages a file)."""
+    mesh = bake(leaf, args.resolution, backend=args.backend)
+    return vein_scene(leaf, mesh, _maps(args, leaf), length_m=args.length_m)
 
 
 def _run_scene(args: argparse.Namespace, path: Path, started: float,
@@ -329,7 +349,7 @@ def _run_cdt(args: argparse.Namespace, paths: list[Path], leaves: list[LeafParam
     baked = []
     with progress_bar(total=len(leaves), unit="leaf", desc="meshing", quiet=args.quiet or mode == "file") as bar:
         for leaf in leaves:     # everything baked (PNGs encoded) before the transaction stages a file
-            baked.append((bake_cdt(leaf, max_area=area, min_angle=angle, backend=args.backend), bake_vein_maps(leaf)))
+            baked.append((bake_cdt(leaf, max_area=area, min_angle=angle, backend=args.backend), _maps(args, leaf)))
             bar.update(1)
     with outputs():             # every file or none
         for leaf, target, (cdt, maps) in zip(leaves, targets, baked):

@@ -37,12 +37,12 @@ from leafview.export.scene import (
     ExportScene,
     SceneLike,
     check_world,
-    leaf_scene,
     leaves_scene,
     scene_from,
 )
 from leafview.export.textures import check_textures
 from leafview.export.usd import write_usd
+from leafview.export.vein_maps import bake_vein_maps, vein_scene
 from leafview.gpu import LeafRenderer
 
 __all__ = [
@@ -140,8 +140,11 @@ def write(scene: ExportScene, path: str | Path, **options: Any) -> Path:
 
 def export_leaf(params: LeafParams, path: str | Path, *, resolution: Sequence[int] = DEFAULT_RESOLUTION,
                 backend: str = "gpu", length_m: float = DEFAULT_LENGTH_M, renderer: LeafRenderer | None = None,
-                **options: Any) -> Path:
+                vein_maps: bool = False, **options: Any) -> Path:
     """Bake ``params`` and write it to ``path`` (format from the suffix), placed by its transform.
+    With ``vein_maps``, a leaf whose venation is enabled carries its baked vein textures (base
+    colour and normal maps, :func:`leafview.export.vein_maps.bake_vein_maps`), as ``leafview
+    export`` writes them; without, its material colours only.
 
     ``options``: ``back_faces`` and ``instancing`` (glTF), ``back_faces`` (USD), ``up`` (OBJ/PLY).
     """
@@ -151,7 +154,8 @@ def export_leaf(params: LeafParams, path: str | Path, *, resolution: Sequence[in
     check_target(path)   # a folder that cannot take the file fails before the bake
     check_textures([(params.name or "leaf", params.texture)])   # and a missing texture file
     mesh = bake(params, resolution, backend=backend, renderer=renderer)
-    return write(leaf_scene(params, mesh, length_m=length_m), path, **options)
+    maps = bake_vein_maps(params) if vein_maps else None
+    return write(vein_scene(params, mesh, maps, length_m=length_m), path, **options)
 
 
 def export_leaves(leaves: Sequence[LeafParams], path: str | Path, *, resolution: Sequence[int] = DEFAULT_RESOLUTION,

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -29,6 +29,9 @@ from leafview.errors import NonFiniteMesh, UsageError
 from leafview.export.mesh import DEFAULT_RESOLUTION, LeafMesh, bake_many, check_mesh
 from leafview.export.textures import SceneTextures, check_textures, load_textures
 from leafview.gpu import LeafRenderer
+
+if TYPE_CHECKING:      # vein_maps builds on this module; the annotation alone needs the type
+    from leafview.export.vein_maps import VeinMaps
 
 __all__ = [
     "BARK",
@@ -84,7 +87,8 @@ class SceneLike(Protocol):
 @dataclass
 class ExportPart:
     """One distinct leaf shape: its baked mesh, material, image texture (None: the material's
-    colours) and the matrices of its copies."""
+    colours), the matrices of its copies and its baked vein textures (``vein_maps``, a
+    :class:`leafview.export.vein_maps.VeinMaps`; None: none, the file as without venation)."""
 
     mesh: LeafMesh
     material: Material
@@ -92,6 +96,7 @@ class ExportPart:
     name: str = ""
     leaf_ids: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     texture: LeafTexture | None = None
+    vein_maps: VeinMaps | None = None
 
 
 @dataclass
@@ -236,10 +241,12 @@ def check_world(scene: ExportScene) -> None:
 
 
 # -- building export scenes ------------------------------------------------------------------
-def leaf_scene(params: LeafParams, mesh: LeafMesh, *, length_m: float = 0.1) -> ExportScene:
-    """A single leaf placed by its own ``params.transform``."""
+def leaf_scene(params: LeafParams, mesh: LeafMesh, *, length_m: float = 0.1,
+               maps: VeinMaps | None = None) -> ExportScene:
+    """A single leaf placed by its own ``params.transform``, with its baked vein textures ``maps``
+    (:func:`leafview.export.vein_maps.bake_vein_maps`; None: none)."""
     part = ExportPart(mesh, params.material, params.transform.matrix()[None], params.name or "leaf",
-                      np.zeros(1, np.int64), params.texture)
+                      np.zeros(1, np.int64), params.texture, maps)
     return ExportScene([part], None, length_m, params.name or "leaf")
 
 

@@ -20,8 +20,10 @@ shader's ``fwidth``):
   stored as ``(n + 1) / 2`` in linear 8-bit RGB. Both sides' veins stand out of their own side,
   as in the shader: the back's tangent frame has the back normal, so the same encoding serves.
 
-:class:`VeinPart` carries a part's :class:`VeinMaps` to the writers (:mod:`.gltf`: ``baseColorTexture``
-and ``normalTexture``; :mod:`.usd`: a ``UsdUVTexture`` into ``diffuseColor`` and one into ``normal``;
+:attr:`ExportPart.vein_maps <leafview.export.scene.ExportPart>` carries a part's :class:`VeinMaps` to the
+writers, read through :func:`maps_of` (the ``--mesh cdt`` venation mesh and the default (u, v) grid
+alike: both have the texture coordinates of :func:`leafview.core.texture.texture_st`, so the same
+images apply) (:mod:`.gltf`: ``baseColorTexture`` and ``normalTexture``; :mod:`.usd`: a ``UsdUVTexture`` into ``diffuseColor`` and one into ``normal``;
 :mod:`.objply`: ``map_Kd`` and ``map_Bump``, PLY ``TextureFile``), and :func:`with_maps` merges the
 images into the export's :class:`~leafview.export.textures.SceneTextures` so that each is written
 once beside the file.
@@ -29,7 +31,7 @@ once beside the file.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -47,7 +49,7 @@ from leafview.export.mesh import LeafMesh
 from leafview.export.scene import ExportPart, ExportScene, leaf_scene
 from leafview.export.textures import PNG, SceneTextures, TextureImage
 
-__all__ = ["MAPS_SIZE", "MAX_SLOPE", "VeinMaps", "VeinPart", "bake_vein_maps", "maps_of", "normal_map",
+__all__ = ["MAPS_SIZE", "MAX_SLOPE", "VeinMaps", "bake_vein_maps", "maps_of", "normal_map",
            "tangents", "vein_scene", "with_maps"]
 
 MAPS_SIZE = 512     # texels a side: twice the renderer's vein field (FIELD_SIZE)
@@ -69,16 +71,9 @@ class VeinMaps:
         return [image for image in (self.front, self.back, self.normal, self.back_normal) if image is not None]
 
 
-@dataclass
-class VeinPart(ExportPart):
-    """An :class:`~leafview.export.scene.ExportPart` with baked vein textures."""
-
-    vein_maps: VeinMaps | None = None
-
-
 def maps_of(part: ExportPart) -> VeinMaps | None:
     """The baked vein textures of ``part`` (None for a part without)."""
-    maps = getattr(part, "vein_maps", None)
+    maps = part.vein_maps
     return maps if isinstance(maps, VeinMaps) else None
 
 
@@ -200,11 +195,9 @@ def bake_vein_maps(params: LeafParams, size: int | None = None) -> VeinMaps | No
 
 
 def vein_scene(params: LeafParams, mesh: LeafMesh, maps: VeinMaps | None, *, length_m: float = 0.1) -> ExportScene:
-    """:func:`leafview.export.scene.leaf_scene` whose part carries ``maps``."""
-    scene = leaf_scene(params, mesh, length_m=length_m)
-    part = scene.parts[0]
-    scene.parts[0] = VeinPart(**{f.name: getattr(part, f.name) for f in fields(part)}, vein_maps=maps)
-    return scene
+    """:func:`leafview.export.scene.leaf_scene` whose part carries ``maps`` (the venation mesh of
+    ``--mesh cdt`` or the (u, v) grid; None: a part without vein textures)."""
+    return leaf_scene(params, mesh, length_m=length_m, maps=maps)
 
 
 def with_maps(scene: ExportScene, textures: SceneTextures, *, one_sided: bool = False,
