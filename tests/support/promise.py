@@ -370,6 +370,18 @@ def _check_document(path: Path) -> None:
         load_leaves(path)
 
 
+def _check_mtl(path: Path) -> None:
+    """An OBJ material library: text with at least one material, every image it names beside it."""
+    lines = path.read_text(encoding="utf-8").splitlines()
+    if not any(line.startswith("newmtl ") for line in lines):
+        raise ValueError("no newmtl")
+    for line in lines:
+        if line.startswith(("map_Kd ", "map_Bump ")):
+            image = path.parent / line.split()[-1]
+            if not image.is_file():
+                raise ValueError(f"{line.split()[0]} names {image.name}, which is not there")
+
+
 def file_problem(path: str | os.PathLike[str]) -> str | None:
     """Why the file a successful run wrote is not complete (None: it reads back, finite)."""
     p = Path(path)
@@ -385,6 +397,8 @@ def file_problem(path: str | os.PathLike[str]) -> str | None:
             _check_obj(p)
         elif suffix == ".ply":
             _check_ply(p)
+        elif suffix == ".mtl":
+            _check_mtl(p)
         elif suffix in (".usda", ".usdc", ".usd"):
             _check_usd(p)
         elif suffix in (".json", ".toml"):
