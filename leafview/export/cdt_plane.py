@@ -24,6 +24,8 @@ and at base and apex) exactly.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
@@ -47,7 +49,7 @@ def _u_range(params: LeafParams) -> tuple[float, float]:
     return (-1.0, 1.0) if not half else ((0.0, 1.0) if half > 0 else (-1.0, 0.0))
 
 
-class Plane:
+class Plane(ABC):
     """Where the leaf is triangulated: ``forward`` maps (u, v) (N, 2) to the plane, ``inverse``
     maps back (and returns the largest residual, 0 for a closed-form inverse)."""
 
@@ -57,11 +59,11 @@ class Plane:
         self.params = params
         self.u_range = _u_range(params)
 
-    def forward(self, uv: NDArray[np.float64]) -> NDArray[np.float64]:
-        raise NotImplementedError
+    @abstractmethod
+    def forward(self, uv: NDArray[np.float64]) -> NDArray[np.float64]: ...
 
-    def inverse(self, p: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
-        raise NotImplementedError
+    @abstractmethod
+    def inverse(self, p: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]: ...
 
 
 class _VeinPlane(Plane):
