@@ -26,6 +26,7 @@ from leafview.cli import main
 from leafview.core.blade import blade_partials
 from leafview.core.colour import srgb_to_linear
 from leafview.core.io import save_params
+from leafview.deform.surface import vein_grid_uv
 from leafview.errors import UsageError
 from leafview.export.cdt import (
     MAX_ORDER,
@@ -37,7 +38,7 @@ from leafview.export.cdt import (
     triangle_angles,
     triangulate_leaf,
 )
-from leafview.export.vein_maps import _texel_uv, bake_vein_maps, normal_map, tangents
+from leafview.export.vein_maps import bake_vein_maps, normal_map, tangents
 
 KINDS = ("ovate", "deltoid", "maize")          # pinnate, palmate, parallel
 
@@ -261,7 +262,7 @@ def _pixels(data: bytes, path: Path) -> np.ndarray:
 def test_base_colour_is_the_shaders_albedo(presets, ovate_maps, tmp_path):
     leaf = presets["ovate"]
     field = vein_field(leaf, 128).astype(np.float64)
-    u, v = _texel_uv(128)
+    u, v = vein_grid_uv(128, 128)
     img = srgb_to_linear(_pixels(ovate_maps.front.data, tmp_path / "f.png"))[..., :3]
     fw = np.stack([np.abs(np.gradient(field[..., k], axis=1)) + np.abs(np.gradient(field[..., k], axis=0))
                    for k in (0, 3)], axis=-1)
@@ -277,7 +278,7 @@ def test_normal_map_is_the_relief_gradient_on_the_leaf(presets):
     normal of the displaced flat blade computed by finite differences in 3D."""
     leaf = presets["ovate"]
     size = 128
-    u, v = _texel_uv(size)
+    u, v = vein_grid_uv(size, size)
     height = 0.004 * np.sin(6.0 * u + 9.0 * v)
     n = normal_map(leaf, height)
     for i, j in ((40, 30), (64, 90), (90, 50)):

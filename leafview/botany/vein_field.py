@@ -49,7 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 from leafview.botany.vein_space import HALFWIDTH_SAMPLES, halfwidth_at, halfwidth_table, vein_space, vein_space_of
 from leafview.botany.venation import vein_segments
 from leafview.core.params import LeafParams
-from leafview.core.texture import uv_of_st
+from leafview.deform.surface import vein_grid_uv
 from leafview.errors import ParamError
 
 __all__ = ["FIELD_SIZE", "FIELD_CAP", "BOUND_REACH", "HALFWIDTH_SAMPLES", "TILE", "MAX_FIELD_SIZE", "RECORD_FLOATS",
@@ -103,9 +103,7 @@ def check_field_size(size: int, path: str = "size") -> int:
 
 def texel_uv(size: int) -> NDArray[np.float64]:
     """(size, size, 2): the (u, v) of each texel centre, [row j, column i]."""
-    c = (np.arange(size, dtype=np.float64) + 0.5) / size
-    u, v = uv_of_st(c[None, :], c[:, None])
-    return np.stack(np.broadcast_arrays(u, v), axis=-1)
+    return np.stack(vein_grid_uv(size, size), axis=-1)
 
 
 def texel_space(table: ArrayLike, size: int) -> NDArray[np.float64]:

@@ -43,7 +43,7 @@ from leafview.botany.vein_shading import RELIEF_BACK, major_width, vein_albedo, 
 from leafview.core.blade import blade_partials
 from leafview.core.colour import linear_to_srgb
 from leafview.core.params import LeafParams
-from leafview.core.texture import uv_of_st
+from leafview.deform.surface import vein_grid_uv
 from leafview.export.images import png_bytes
 from leafview.export.mesh import LeafMesh
 from leafview.export.scene import ExportPart, ExportScene, leaf_scene
@@ -77,13 +77,6 @@ def maps_of(part: ExportPart) -> VeinMaps | None:
     return maps if isinstance(maps, VeinMaps) else None
 
 
-def _texel_uv(size: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(u, v) of the texel centres, each (size, size), row 0 at the apex."""
-    c = (np.arange(size) + 0.5) / size
-    u, v = uv_of_st(c[None, :], c[:, None])
-    return np.broadcast_to(u, (size, size)).copy(), np.broadcast_to(v, (size, size)).copy()
-
-
 def _footprint(d: NDArray[np.float64]) -> NDArray[np.float64]:
     """GLSL ``fwidth`` of ``d`` over the texel grid: |∂d/∂x| + |∂d/∂y| per texel."""
     return np.abs(np.gradient(d, axis=1)) + np.abs(np.gradient(d, axis=0))
@@ -91,11 +84,11 @@ def _footprint(d: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def normal_map(params: LeafParams, height: NDArray[np.float64]) -> NDArray[np.float64]:
     """Unit tangent-space normals (size, size, 3) of the relief ``height`` (leaf lengths, texel
-    grid of :func:`_texel_uv`) on the flat blade: the height's gradient along the unit tangent T
+    grid of :func:`leafview.deform.surface.vein_grid_uv`) on the flat blade: the height's gradient along the unit tangent T
     (direction of increasing s) and bitangent B (in the tangent plane, perpendicular to T, towards
     the apex), ``n = normalize(-∂h/∂T, -∂h/∂B, 1)``, the slope clamped to :data:`MAX_SLOPE`."""
     size = height.shape[0]
-    u, v = _texel_uv(size)
+    u, v = vein_grid_uv(size, size)
     p = blade_partials(params, u.ravel(), v.ravel())[0]
     lu, lv = p.Lu.reshape(size, size, 3), p.Lv.reshape(size, size, 3)
     # h_u, h_v: a column is du = -2 / size, a row dv = -1 / size
@@ -175,7 +168,7 @@ def bake_vein_maps(params: LeafParams, size: int | None = None) -> VeinMaps | No
         return None
     size = check_field_size(MAPS_SIZE if size is None else size, "size")
     field = vein_field(params, size).astype(np.float64)
-    u, v = _texel_uv(size)
+    u, v = vein_grid_uv(size, size)
     fw = np.stack([_footprint(field[..., 0]), _footprint(field[..., 3])], axis=-1)
     major = major_width(venation)
     height = np.maximum(vein_height(field[..., 0], field[..., 2], venation.relief, fw[..., 0]),
