@@ -8,6 +8,7 @@ import re
 import numpy as np
 import pytest
 
+from leafview.core.lobes import Lobes
 from leafview.core.params import (
     OMEGA_SIZE,
     SCHEMA_VERSION,
@@ -162,6 +163,7 @@ def test_field_specs_cover_every_field_with_sane_ranges():
     expected = {f"{g}.{k}" for g in ("shape", "jitter", "material", "transform", "ripple", "bending") for k in d[g]}
     # the venation group is left out of a default leaf's file (leafview.core.venation): its fields
     expected |= {f"venation.{f.name}" for f in dataclasses.fields(Venation)}
+    expected |= {f"lobes.{f.name}" for f in dataclasses.fields(Lobes)}   # the same for lobed leaves
     assert set(specs) == expected
     for path, spec in specs.items():
         assert spec.soft_range[0] < spec.soft_range[1], path

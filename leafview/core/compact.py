@@ -45,6 +45,7 @@ from leafview.core.params import (
     parse_params,
     split_omega,
 )
+from leafview.core.lobes import Lobes, lobes_dict
 from leafview.core.venation import Venation, venation_dict
 from leafview.inputs import parse_json
 
@@ -52,7 +53,7 @@ __all__ = ["COMPACT_VERSION", "OPTIONAL_GROUPS", "compact_dict", "dumps", "dumps
            "loads", "omega_path", "parse_compact", "parse_leaves", "round_params"]
 
 COMPACT_VERSION = 1
-OPTIONAL_GROUPS = ("jitter", "material", "transform", "ripple", "bending", "venation")
+OPTIONAL_GROUPS = ("jitter", "material", "transform", "ripple", "bending", "venation", "lobes")
 _LEAF_KEYS = ("name", "omega", "half", *OPTIONAL_GROUPS, "texture")
 
 
@@ -108,6 +109,7 @@ def compact_dict(params: LeafParams, *, digits: int | None = None, version: bool
     full = params.to_dict()
     default = LeafParams().to_dict()
     default["venation"] = venation_dict(Venation(), keep_empty_edits=True)
+    default["lobes"] = lobes_dict(Lobes())
     out: dict[str, Any] = {"leafview": COMPACT_VERSION} if version else {}
     if params.name:
         out["name"] = params.name

@@ -38,6 +38,7 @@ from leafview.core.display import png_of
 from leafview.core.fieldspec import FieldSpec, check_choice, check_range, number, spec_field
 from leafview.core.limits import MAX_SILHOUETTE_ROWS, check_name
 from leafview.core.texture import LeafTexture, parse_texture
+from leafview.core.lobes import BranchTurtle, Lobes, lobes_dict, parse_lobes_field
 from leafview.core.venation import VeinEdit, Venation, parse_edits, venation_dict
 from leafview.errors import ParamError
 
@@ -54,6 +55,8 @@ __all__ = [
     "Ripple",
     "Bending",
     "Venation",
+    "Lobes",
+    "BranchTurtle",
     "VeinEdit",
     "LeafParams",
     "field_specs",
@@ -284,6 +287,7 @@ class LeafParams:
     ripple: Ripple = field(default_factory=Ripple)
     bending: Bending = field(default_factory=Bending)
     venation: Venation = field(default_factory=Venation)   # leafview.core.venation; off by default
+    lobes: Lobes = field(default_factory=Lobes)            # leafview.core.lobes; unlobed by default
     name: str = ""
     texture: LeafTexture | None = None   # front/back images addressed by (u, v) (leafview.core.texture)
 
@@ -318,6 +322,10 @@ class LeafParams:
             if group == "venation":   # written only when set, so older files read and write back unchanged
                 if obj != Venation():
                     out[group] = venation_dict(obj, keep_empty_edits=True)
+                continue
+            if group == "lobes":      # the same: only lobed leaves write a [lobes] table
+                if obj.enabled:
+                    out[group] = lobes_dict(obj)
                 continue
             out[group] = {f.name: _plain(getattr(obj, f.name)) for f in fields(obj)}
         if self.texture is not None:
@@ -425,7 +433,8 @@ def field_specs() -> dict[str, FieldSpec]:
 # ---------------------------------------------------------------------------------------------
 # validation
 _GROUPS: dict[str, type] = {"shape": Shape, "jitter": Jitter, "material": Material, "transform": Transform,
-                             "ripple": Ripple, "bending": Bending, "venation": Venation}
+                             "ripple": Ripple, "bending": Bending, "venation": Venation,
+                             "lobes": Lobes}
 _TOP_KEYS = {"schema", "name", "texture", *_GROUPS}
 
 
@@ -504,7 +513,11 @@ def _parse_group(cls: type, data: Any, group: str, *, required: bool) -> Any:
             if required and not (cls is Shape and name in _OPTIONAL_SHAPE):  # optional in schema 1 files
                 raise ParamError(path, "missing field")
             continue
-        values[name] = _parse_field(data[name], f.metadata["spec"], path, rows)
+        spec = f.metadata["spec"]
+        if spec.kind in ("outline", "points", "turtle"):   # leafview.core.lobes
+            values[name] = parse_lobes_field(name, data[name], path, values.get("outline", ()))
+            continue
+        values[name] = _parse_field(data[name], spec, path, rows)
         if name == "silhouette":
             rows = len(values[name])
     obj = cls(**values)

@@ -34,6 +34,9 @@ from leafview.core import params as P
 from leafview.core.compact import COMPACT_VERSION, OPTIONAL_GROUPS
 from leafview.core.limits import MAX_NAME_CHARS
 from leafview.core.texture import MAX_TEXTURE_PATH
+from leafview.core.bspline import MAX_CONTROLS, MIN_CONTROLS
+from leafview.core.lobes import (MAX_BRANCHES, MAX_VALLEYS, OUTLINE_LIMIT, TURTLE_KNOTS, BranchTurtle, Lobes, lobes_dict,
+                                 turtle_specs)
 from leafview.core.venation import MAX_EDITS, VeinEdit, Venation, edit_specs, venation_dict
 
 __all__ = ["SCHEMA_ID", "DIALECT", "compact_schema", "compact_leaf_schema", "doc_line", "leaf_schema"]
@@ -105,7 +108,28 @@ def _field(spec: P.FieldSpec) -> dict[str, Any]:
         return {"type": "string", "enum": list(spec.choices)}
     if kind == "edits":
         return _edits_schema()
+    if kind in ("outline", "points"):
+        lo, hi = (MIN_CONTROLS, MAX_CONTROLS) if kind == "outline" else (0, MAX_VALLEYS)
+        point = {"type": "array", "items": {"type": "number", "minimum": -OUTLINE_LIMIT, "maximum": OUTLINE_LIMIT},
+                 "minItems": 2, "maxItems": 2}
+        out = {"type": "array", "items": point, "maxItems": hi}
+        if kind == "outline":   # empty (not lobed) or a closed B-spline's control points
+            out["anyOf"] = [{"maxItems": 0}, {"minItems": lo}]
+        return out
+    if kind == "knots":
+        return _array(_number(spec), TURTLE_KNOTS)
+    if kind == "turtle":
+        return _turtle_schema()
     raise ValueError(f"leafview.core.schema does not know the field kind {kind!r}: extend _field()")
+
+
+def _turtle_schema() -> dict[str, Any]:
+    """``lobes.branches``: turtle edits per skeleton branch (:class:`~leafview.core.lobes.BranchTurtle`),
+    each branch at most once (which the loader checks; the schema cannot)."""
+    props = {name: {"title": spec.label, **_field(spec)} for name, spec in turtle_specs().items()}
+    item = {"type": "object", "description": doc_line(BranchTurtle), "properties": props,
+            "required": ["branch"], "additionalProperties": False}
+    return {"type": "array", "items": item, "maxItems": MAX_BRANCHES}
 
 
 def _edits_schema() -> dict[str, Any]:
@@ -127,6 +151,7 @@ def _default_document() -> dict[str, Any]:
     a default leaf leaves out of its file, with an empty ``edits`` list)."""
     doc = P.LeafParams().to_dict()
     doc["venation"] = venation_dict(Venation(), keep_empty_edits=True)
+    doc["lobes"] = lobes_dict(Lobes())
     return doc
 
 
