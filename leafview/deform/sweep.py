@@ -1,0 +1,141 @@
+"""The swept surface of a lobed leaf (Mündermann et al. 2003, secs 3.3-4): railroad ties between a
+branching skeleton and one closed margin, carried by turtle frames. This is the numpy twin of
+the lobed branch of ``shaders/leaf_eval.glsl``; a readback test compares the two.
+
+A :class:`SweepTable` holds ``N`` railroad ties T_j in the order the sweep visits them: clockwise
+around the margin from the base (base → left side → apex → right side → base), which is the
+skeleton's tour, each skeleton edge once distally and once basally (Mündermann et al. 2003,
+sec. 3.3). Tie j runs from its foot k_j on the skeleton to s_j on the margin. Per tie the table
+stores, already deformed by the turtle (Mündermann et al. 2003, sec. 4, eqs 2-3, and the
+per-branch bend, twist and turn):
+
+* ``origin``  X_j: the foot in leaf space;
+* ``rim``     the tie's end, X_j + R_j (s_j - k_j, 0) with R_j the turtle's rotation at the foot;
+* ``up``      R_j ẑ, the turtle's up axis (the direction of cupping and ripples);
+* ``length``  ℓ_j = |s_j - k_j|;
+* ``flat``    (k_j, s_j) of the flat leaf, the shading coordinates (Mündermann et al. 2003, eq. 1);
+* ``margin``  w_j, the margin's arc length from the base to s_j over the whole margin (0 ≤ w < 1).
+
+The surface is evaluated on the grid the other leaves use: u in [-1, 1] runs along the tie,
+t = (u + 1) / 2 (0 on the skeleton, 1 on the margin); v in [0, 1] runs along the tour, x = v N.
+Between ties each stored quantity q is the periodic Catmull-Rom spline through q_j (at grid rows,
+x is an integer and q(x) = q_j exactly, so the two sides of a skeleton edge, whose feet the
+table pairs, meet without a crack):
+
+    P(t, x) = O(x) + t (E(x) - O(x)) + cup ℓ(x) t² U(x)
+
+O, E, U, ℓ the splines of origin, rim, up and length; ``cup`` cups the ties (0: the straight
+generating line). The upper-side normal is normalize(∂P/∂v × ∂P/∂u), or U where the tie has no
+extent (at a skeleton tip, where the foot turns back).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["SWEEP_ROWS", "SweepTable", "SweepEval", "sweep_eval", "catmull_rom_periodic", "table_texels"]
+
+SWEEP_ROWS = 256     # ties per table: a multiple of 4, so grids of N/2 and N/4 rows keep the pairing
+
+
+@dataclass(frozen=True)
+class SweepTable:
+    """Railroad ties of a lobed leaf (see the module docstring); arrays of N rows, float64."""
+
+    origin: NDArray[np.float64]   # (N, 3)
+    rim: NDArray[np.float64]      # (N, 3)
+    up: NDArray[np.float64]       # (N, 3)
+    length: NDArray[np.float64]   # (N,)
+    flat: NDArray[np.float64]     # (N, 4): k_x, k_y, s_x, s_y
+    margin: NDArray[np.float64]   # (N,): w_j in [0, 1), increasing
+    cup: float = 0.0
+
+    @property
+    def rows(self) -> int:
+        return len(self.origin)
+
+
+@dataclass(frozen=True)
+class SweepEval:
+    """Positions ``L``, partials ``Lu``, ``Lv``, upper-side normals ``normal`` (n, 3), the flat
+    position ``flat`` (n, 2) and the margin coordinate ``w`` (n,) at the evaluated (u, v)."""
+
+    L: NDArray[np.float64]
+    Lu: NDArray[np.float64]
+    Lv: NDArray[np.float64]
+    normal: NDArray[np.float64]
+    flat: NDArray[np.float64]
+    w: NDArray[np.float64]
+
+
+def table_texels(table: SweepTable) -> NDArray[np.float32]:
+    """The table as the (4, N, 4) float32 texels the shader reads (row r of the texture, tie j):
+    r0 (origin, w), r1 (rim, ℓ), r2 (up, 0), r3 (k, s)."""
+    n = table.rows
+    out = np.zeros((4, n, 4), np.float32)
+    out[0, :, :3], out[0, :, 3] = table.origin, table.margin
+    out[1, :, :3], out[1, :, 3] = table.rim, table.length
+    out[2, :, :3] = table.up
+    out[3] = table.flat
+    return out
+
+
+def catmull_rom_periodic(q: ArrayLike, x: ArrayLike, *, period_offset: ArrayLike | None = None
+                         ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The periodic Catmull-Rom spline through rows ``q`` (N, ...) at positions ``x`` (rows, any
+    real) and its derivative d/dx. ``period_offset``: what a row gains per wrap past N (the
+    margin coordinate gains 1), zero by default."""
+    q = np.asarray(q, dtype=np.float64)
+    x = np.asarray(x, dtype=np.float64)
+    n = len(q)
+    fl = np.floor(x)
+    f = (x - fl)[(...,) + (None,) * (q.ndim - 1)]
+    j = fl.astype(np.int64)
+    pts = []
+    for k in (-1, 0, 1, 2):
+        idx = j + k
+        wraps = np.floor_divide(idx, n)
+        val = q[np.mod(idx, n)]
+        if period_offset is not None:
+            val = val + wraps[(...,) + (None,) * (q.ndim - 1)] * np.asarray(period_offset, dtype=np.float64)
+        pts.append(val)
+    p0, p1, p2, p3 = pts
+    c1 = 0.5 * (p2 - p0)
+    c2 = p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3
+    c3 = 0.5 * (p3 - p0) + 1.5 * (p1 - p2)
+    value = ((c3 * f + c2) * f + c1) * f + p1
+    slope = (3.0 * c3 * f + 2.0 * c2) * f + c1
+    return value, slope
+
+
+def sweep_eval(table: SweepTable, uv: ArrayLike) -> SweepEval:
+    """The lobed surface at grid coordinates ``uv`` (n, 2): t = (u + 1) / 2 along the tie, x = v N
+    along the tour (see the module docstring)."""
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+    n = table.rows
+    t = 0.5 * (uv[:, 0] + 1.0)
+    x = uv[:, 1] * n
+    o, do = catmull_rom_periodic(table.origin, x)
+    e, de = catmull_rom_periodic(table.rim, x)
+    up, dup = catmull_rom_periodic(table.up, x)
+    ln, dln = catmull_rom_periodic(table.length, x)
+    fl, _ = catmull_rom_periodic(table.flat, x)
+    w, _ = catmull_rom_periodic(table.margin, x, period_offset=1.0)
+    tt = t[:, None]
+    cup = table.cup
+    L = o + tt * (e - o) + (cup * ln * t * t)[:, None] * up
+    dt = (e - o) + (2.0 * cup * ln * t)[:, None] * up
+    dx = do + tt * (de - do) + (cup * t * t)[:, None] * (dln[:, None] * up + ln[:, None] * dup)
+    Lu = 0.5 * dt
+    Lv = n * dx
+    nrm = np.cross(Lv, Lu)
+    size = np.linalg.norm(nrm, axis=1)
+    scale = np.maximum(np.linalg.norm(Lu, axis=1) * np.linalg.norm(Lv, axis=1), 1e-30)
+    upn = up / np.maximum(np.linalg.norm(up, axis=1, keepdims=True), 1e-30)
+    ok = size > 1e-6 * scale
+    normal = np.where(ok[:, None], nrm / np.where(ok, size, 1.0)[:, None], upn)
+    flat = fl[:, :2] + tt * (fl[:, 2:] - fl[:, :2])
+    return SweepEval(L, Lu, Lv, normal, flat, np.mod(w, 1.0))
