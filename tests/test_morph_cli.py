@@ -24,7 +24,8 @@ def test_public_names_from_the_issue():
 
     assert lm.fit_margin is model_lm.fit_margin and set(lm.__all__) == set(model_lm.__all__)
     rows = catalogue()
-    assert len(rows) == 62 and sum(r.table1 for r in rows) == 50 and sum(r.named for r in rows) == 14
+    assert len(rows) == 64 and sum(r.table1 for r in rows) == 50 and sum(r.named for r in rows) == 14
+    assert sum(r.apex == "drip" for r in rows) == 2
     first = rows[0]
     assert (first.name, first.waist, first.base, first.apex, first.unilobed) == \
         ("elliptic-concave-concave", "elliptic", "concave", "concave", True)
@@ -196,3 +197,92 @@ def test_cli_asymmetric_source_writes_both_halves(gl, tmp_path, capsys):
     halves = [LeafParams.load(out / f"frame_0.{side}.toml").shape.half for side in ("right", "left")]
     assert halves == [-1, 1]
     assert "2 asymmetric frame(s)" in capsys.readouterr().out
+
+
+# -- lobed targets and growth with size (Garg & Leow 2011, Figs 12-13) ----------------------------
+
+def _star_preset(path):
+    """A five-lobed leaf preset (``[lobes]`` outline, clockwise from the base) written to ``path``."""
+    from leafview.core.bspline import fit_closed
+    from leafview.core.lobes import Lobes, parse_outline
+
+    th = -np.pi / 2 - np.linspace(0.0, 2.0 * np.pi, 2000, endpoint=False)
+    r = 0.5 * (1.0 - 0.35 * (0.5 - 0.5 * np.cos(5 * (th + np.pi / 2))))
+    ring = np.stack([r * np.cos(th), 0.5 + r * np.sin(th)], axis=1)
+    LeafParams(lobes=Lobes(outline=parse_outline(fit_closed(ring, 64).tolist())), name="star").save(path)
+    return str(path)
+
+
+@pytest.mark.gl
+def test_cli_unilobed_to_lobed_with_growth(gl, tmp_path, capsys):
+    star = _star_preset(tmp_path / "star.toml")
+    out = tmp_path / "lobed"
+    assert main(["morph", "ovate", star, "--steps", "5", "--sizes", "0.4,1", "-o", str(out), "--size", "48",
+                 "--presets", "-q"]) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert names == [f"frame_{i}.{ext}" for i in range(5) for ext in ("png", "toml")] + ["morph.json", "sheet.png"]
+    frames = [LeafParams.load(out / f"frame_{i}.toml") for i in range(5)]
+    assert all(f.lobes.enabled for f in frames)
+    scales = [f.transform.scale for f in frames]
+    assert scales[0] == pytest.approx(0.4) and scales[-1] == pytest.approx(1.0) and np.all(np.diff(scales) > 0)
+    report = json.loads((out / "morph.json").read_text())
+    assert report["space"] == "margin" and report["sizes"] == [0.4, 1.0] and report["controls"] == 96
+    assert [f["size"] for f in report["frame"]] == pytest.approx(scales)
+    img, meta = read_image(out / "frame_2.png")
+    assert LeafParams.from_dict(json.loads(meta[PARAMS_ATTRIBUTE])) == frames[2]
+    # growth: the last frame covers more of the shared camera than the first
+    cover = [(read_image(out / f"frame_{i}.png")[0][..., 3] > 0).mean() for i in (0, 4)]
+    assert cover[0] < cover[1]
+    assert "lobed frames" in capsys.readouterr().out
+
+
+@pytest.mark.gl
+def test_cli_sizes_scale_unilobed_frames(gl, tmp_path):
+    out = tmp_path / "grow"
+    assert main(["morph", "lanceolate", "cordate", "--ref", "oblong:2", "--sizes", "0.3,0.5,1", "--frames", "6",
+                 "--fast", "-o", str(out), "--size", "32", "--presets", "-q"]) == 0
+    report = json.loads((out / "morph.json").read_text())
+    sizes = [f["size"] for f in report["frame"]]
+    assert sizes[0] == pytest.approx(0.3) and sizes[-1] == pytest.approx(1.0) and np.all(np.diff(sizes) > 0)
+    assert LeafParams.load(out / "frame_3.toml").transform.scale == pytest.approx(sizes[3])
+
+
+@pytest.mark.parametrize("args, message", [
+    (["ovate", "STAR", "--sizes", "1,2,3"], "--sizes: expected 2 sizes"),
+    (["ovate", "STAR", "--sizes", "1,0"], "--sizes[1]"),
+    (["ovate", "STAR", "--sizes", "1,x"], "--sizes[1]"),
+    (["lanceolate", "cordate", "--ref", "oblong", "--sizes", "1,2"], "--sizes: expected 3 sizes"),
+    (["lanceolate", "cordate", "--sizes=-1,2"], "--sizes[0]"),
+    (["nosuchshape", "STAR"], "A"),
+    (["ovate", "STAR", "--ref", "nosuchshape:2"], "--ref nosuchshape:2"),
+    (["ovate", "STAR", "--method", "keyframe"], "keyframe"),
+])
+def test_lobed_and_sizes_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, args, message):
+    star = _star_preset(tmp_path.parent / f"{tmp_path.name}-star.toml")
+    args = [star if a == "STAR" else a for a in args]
+    assert main(["morph", *args, "-o", str(tmp_path / "out"), "-q"]) == 2
+    assert message in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_controller_grows_and_morphs_to_a_lobed_target(state, tmp_path, monkeypatch):
+    import leafview.app.morph_panel as mp
+
+    c = mp.MorphController(state, source="lanceolate", target="cordate", grow=True)
+    c.set_t(0.0)
+    assert state.params.transform.scale == pytest.approx(mp.GROWTH_SIZES[0])
+    c.set_t(1.0)
+    assert state.params.transform.scale == pytest.approx(mp.GROWTH_SIZES[-1])
+    assert not state.params.lobes.enabled
+    star = _star_preset(tmp_path / "star.toml")
+    monkeypatch.setattr(mp, "_lobed_names", lambda: (star,))
+    assert star in c.targets() and "cordate" in c.targets()
+    c.choose(target=star)
+    assert c.lobed and state.params.lobes.enabled and c.last_error is None
+    np.testing.assert_allclose(np.asarray(state.params.lobes.outline),
+                               mp._lobe_path("lanceolate", star, mp.NO_REFERENCE, 1.0, True).controls_at(1.0))
+    c.choose(target="cordate")                    # back to a unilobed target: the leaf is unlobed again
+    assert not state.params.lobes.enabled and not c.lobed
+    c.choose(grow=False)
+    with pytest.raises(ValueError, match="target"):
+        c.choose(target="nosuchshape")

@@ -36,7 +36,7 @@ ENTRIES = catalogue()
 
 def test_table1_has_fifty_types_and_fig5_fourteen_names():
     names = catalogue_names()
-    assert len(names) == len(set(names)) == 62
+    assert len(names) == len(set(names)) == 64          # + the two drip-tip shapes of Fig. 7
     table1 = [e for e in ENTRIES if e.table1]
     assert len(table1) == 50
     combos = [(e.waist, e.base, e.apex) for e in table1 if e.waist in ("elliptic", "ovate", "obovate")]
@@ -113,6 +113,8 @@ def test_base_and_apex_curvature_have_the_right_sign(e):
             assert bulge < -1e-3 and turn < 0, (end, bulge, turn)
         elif kind == "straight":
             assert abs(bulge) < 1e-9 and abs(turn) < 1e-12, (end, bulge, turn)
+        elif kind == "drip":   # the slender tip closes convexly onto the apex (tests/test_drip_tips.py)
+            assert end == "apex" and turn > 0 and leaf.right.drip_tip, (end, turn)
         else:  # extended: the margin leaves the base downwards / enters the apex from above
             if end == "base":
                 assert leaf.has_basal_extension and right[:, 1].min() < -0.05 and right[1, 1] < 0

@@ -5,7 +5,8 @@ obovate = high, oblong = parallel-sided middle, linear = width < 1/10 of length)
 base type and an apex type (concave, straight, convex, or with a basal/apical extension). Table 1
 counts 3 × 4 × 4 = 48 such types plus one oblong and one linear: 50. Fig. 5 adds 14 names
 botanists use (elliptic, lanceolate, ...); oblong and linear are both a Table 1 type and a Fig. 5
-name, so :func:`catalogue` has 50 + 12 = 62 entries.
+name, so the Table 1 and Fig. 5 shapes are 50 + 12 = 62 entries; two drip-tip shapes of Fig. 7
+(``ovate-drip``, ``elliptic-drip``) make :func:`catalogue` 64.
 
 How a type becomes landmarks (our construction; the paper shows pictures, not numbers):
 
@@ -17,6 +18,10 @@ How a type becomes landmarks (our construction; the paper shows pictures, not nu
   margin bulges out (positive curvature). The apex is the mirror image with t_a ∥ (-x_w, 1 - y_w - c/4).
 * ``extended`` base: a tail landmark below the base (y_t < 0) and θ_b > π/2 (the margin leaves the
   base downwards); ``extended`` apex: a shoulder above the apex (y_s > 1) and θ_a > π/2.
+* ``drip`` apex (Fig. 7, sec. 3.1: "initially concave and then convex"): an extra margin
+  landmark at the foot of a long slender tip, in the shoulder slot below the apex
+  (:func:`~leafview.botany.landmarks.drip_tip`; recipe values ``drip`` = tip length and
+  ``tip_width`` = half-width at its foot).
 * ``oblong``: parallel sides over the middle fifth and more need two extra margin landmarks with
   tangent (0, 1) (see :func:`_parallel_side`); ``linear``: full width 0.08 of the length.
 
@@ -36,11 +41,19 @@ import numpy as np
 import tomli_w
 
 from leafview.atomic import atomic_output
-from leafview.botany.landmarks import LandmarkLeaf, SideLandmarks, check_margin, outline, outline_sides
+from leafview.botany.landmarks import (
+    LandmarkLeaf,
+    SideLandmarks,
+    check_margin,
+    drip_tip,
+    outline,
+    outline_sides,
+)
 from leafview.core.io import read_document
 from leafview.core.params import ParamError
 
 __all__ = [
+    "APEX_TYPES",
     "MARGIN_TYPES",
     "WAIST_TYPES",
     "ShapeEntry",
@@ -61,6 +74,7 @@ __all__ = [
 
 WAIST_TYPES = ("elliptic", "ovate", "obovate", "oblong", "linear")
 MARGIN_TYPES = ("concave", "straight", "convex", "extended")
+APEX_TYPES = MARGIN_TYPES + ("drip",)
 
 
 @dataclass(frozen=True)
@@ -73,7 +87,8 @@ class ShapeEntry:
         ``"elliptic-concave-convex"`` for the 48 waist × base × apex types of Fig. 4, else the
         botanical name (``"cordate"``).
     waist, base, apex : str
-        Waist type (:data:`WAIST_TYPES`) and base / apex types (:data:`MARGIN_TYPES`).
+        Waist type (:data:`WAIST_TYPES`), base type (:data:`MARGIN_TYPES`) and apex type
+        (:data:`APEX_TYPES`: the margin types or ``"drip"``).
     unilobed : bool
         Always True here (multilobed leaves are built from these, sec. 5).
     table1 : bool
@@ -92,6 +107,9 @@ class ShapeEntry:
     parallel : float
         Oblong only: the margin runs straight up at x = x_w from y_w - parallel to
         y_w + parallel (see :func:`_parallel_side`).
+    drip, tip_width : float
+        Drip apex only: the tip's length and its half-width at the foot, in leaf lengths
+        (:func:`~leafview.botany.landmarks.drip_tip`).
     """
 
     name: str
@@ -111,9 +129,13 @@ class ShapeEntry:
     theta_b: float = 150.0
     theta_a: float = 150.0
     parallel: float = 0.0
+    drip: float = 0.25
+    tip_width: float = 0.03
 
     def side(self) -> SideLandmarks:
         """The right side's landmarks (eq. 1) for this recipe."""
+        if self.apex == "drip":
+            return _drip_side(self.half_width, self.waist_y, self.base, self.base_amount, self.drip, self.tip_width)
         if self.parallel > 0.0:
             return _parallel_side(self.half_width, self.waist_y, self.parallel, self.base, self.apex,
                                   self.base_amount, self.apex_amount)
@@ -177,6 +199,15 @@ def _side_from_recipe(x_w: float, y_w: float, base: str, apex: str, base_amount:
     return SideLandmarks(theta_b, theta_a, (x_w, y_w), tail=tail, shoulder=shoulder)
 
 
+def _drip_side(x_w: float, y_w: float, base: str, base_amount: float, length: float,
+               half_width: float) -> SideLandmarks:
+    """A side ending in a drip tip (Fig. 7): the base as for the other types, then the foot of
+    the tip in the shoulder slot and the apex angle of :func:`~leafview.botany.landmarks.drip_tip`."""
+    shoulder, angle, theta_a = drip_tip(length, half_width, (x_w, y_w))
+    theta_b = _shaped_angle(straight_base_angle(x_w, y_w), base, base_amount)
+    return SideLandmarks(theta_b, theta_a, (x_w, y_w), shoulder=shoulder, shoulder_angle=angle)
+
+
 def _parallel_side(x_w: float, y_w: float, half: float, base: str, apex: str, base_amount: float,
                    apex_amount: float) -> SideLandmarks:
     """An oblong side: parallel to the midrib over y_w ± half.
@@ -231,6 +262,14 @@ _NAMED: tuple[ShapeEntry, ...] = (
                half_width=0.62, waist_y=0.45, tail=(0.32, -0.2), theta_b=165.0, apex_amount=0.95),
 )
 
+# Fig. 7 (top row): leaves with drip tips (Ficus religiosa-like ovate, and an elliptic one).
+_DRIP: tuple[ShapeEntry, ...] = (
+    ShapeEntry("ovate-drip", "ovate", "convex", "drip", figure="Fig. 7 (top)",
+               half_width=0.3, waist_y=0.34, base_amount=0.6, drip=0.28, tip_width=0.03),
+    ShapeEntry("elliptic-drip", "elliptic", "convex", "drip", figure="Fig. 7 (top)",
+               half_width=0.22, waist_y=0.42, base_amount=0.5, drip=0.22, tip_width=0.028),
+)
+
 
 def _table1_types() -> list[ShapeEntry]:
     out = []
@@ -245,14 +284,15 @@ def _table1_types() -> list[ShapeEntry]:
     return out
 
 
-_CATALOGUE: tuple[ShapeEntry, ...] = tuple(_table1_types()) + _NAMED
+_CATALOGUE: tuple[ShapeEntry, ...] = tuple(_table1_types()) + _NAMED + _DRIP
 _BY_NAME = {e.name: e for e in _CATALOGUE}
 
 
 def catalogue() -> list[ShapeEntry]:
     """All catalogue shapes: the 48 waist × base × apex types of Fig. 4 in Fig. 4's order, then
     the 14 named shapes of Fig. 5 in its order (oblong and linear, Table 1's last two types,
-    are among them): 62 entries, 50 with ``table1`` and 14 with ``named``."""
+    are among them), then the 2 drip-tip shapes of Fig. 7: 64 entries, 50 with ``table1``, 14 with
+    ``named`` and 2 with apex ``"drip"``."""
     return list(_CATALOGUE)
 
 
@@ -271,7 +311,7 @@ def entry(name: str) -> ShapeEntry:
 
 
 _SIDE_FIELDS = tuple(f.name for f in fields(SideLandmarks))
-_RECIPE_FIELDS = ("half_width", "waist_y", "base_amount", "apex_amount", "parallel")
+_RECIPE_FIELDS = ("half_width", "waist_y", "base_amount", "apex_amount", "parallel", "drip", "tip_width")
 
 
 def _as_side(value: Any, key: str, which: str) -> SideLandmarks:
@@ -292,8 +332,9 @@ def landmark_leaf(name_or_entry: str | ShapeEntry, **overrides: Any) -> Landmark
     name_or_entry : str or ShapeEntry
         A catalogue name (``"ovate"``, ``"elliptic-concave-convex"``) or entry.
     **overrides
-        * recipe values ``half_width``, ``waist_y``, ``base_amount``, ``apex_amount``, ``parallel``: rebuild
-          the landmarks (the base and apex angles follow, so a straight base stays straight);
+        * recipe values ``half_width``, ``waist_y``, ``base_amount``, ``apex_amount``, ``parallel``,
+          ``drip``, ``tip_width``: rebuild the landmarks (the base and apex angles follow, so a
+          straight base stays straight; ``drip`` / ``tip_width`` act on drip-tip shapes);
         * :class:`SideLandmarks` fields (``theta_b``, ``theta_a`` in radians, ``waist``,
           ``tail``, ``shoulder``, ``tail_angle``, ``shoulder_angle``) set on both sides, or on one
           side with a ``right_`` / ``left_`` prefix (``left_waist=(0.2, 0.45)``);

@@ -15,8 +15,15 @@ apex           ``(0, 1)``          ``(-sin θ_a, cos θ_a)``                  (e
 The tail is the lowest point of a basal extension (cordate base), the shoulder the highest point
 of an apical extension (emarginate / obcordate apex); the paper only writes eq. 1 for the tail and
 says "other leaf types are defined in a similar manner", so the shoulder tangent (-1, 0) is our
-reading. φ_t and φ_s are free only in the unified leaf space of sec. 6.2 (eq. 10), where a tail
-or shoulder inserted into a leaf without one sits on its margin with the margin's tangent.
+reading. A *drip tip* (sec. 3.1, Fig. 7: "apex shapes initially concave and then convex") is the
+shoulder slot used below the apex: :func:`drip_tip` puts an extra margin landmark at the foot of
+the tip (y_s = 1 - tip length, a small x_s) whose tangent points almost straight up, slightly in
+towards the midrib. The quadratic margin then bends in from the waist (concave) to the foot of the
+tip and closes over the slender tip to the apex (convex), the additional landmark the paper says
+makes a long drip tip match.
+
+φ_t and φ_s are free only in the unified leaf space of sec. 6.2 (eq. 10), where a tail or
+shoulder inserted into a leaf without one sits on its margin with the margin's tangent.
 
 :func:`fit_margin` fits the quadratic B-spline of eqs 2-6 through the landmarks (implemented in
 :mod:`leafview.botany.hermite`, re-exported here); the whole leaf is
@@ -57,6 +64,7 @@ __all__ = [
     "SideLandmarks",
     "check_margin",
     "chord_parameters",
+    "drip_tip",
     "fit_margin",
     "fit_margin_report",
     "hermite_knots",
@@ -179,6 +187,15 @@ class SideLandmarks:
     def apical_extension(self) -> bool:
         """A shoulder above the apex (y_s > 1)."""
         return self.shoulder is not None and self.shoulder[1] > 1.0
+
+    @property
+    def drip_tip(self) -> bool:
+        """A shoulder below the apex, close to the midrib, entered almost straight up: the foot of a
+        drip tip (:func:`drip_tip`), not an apical extension nor an oblong side's parallel end."""
+        if self.shoulder is None:
+            return False
+        xs, ys = self.shoulder
+        return ys < 1.0 and xs < self.waist[0] / 3.0 and math.pi / 2.0 < self.shoulder_angle <= 0.75 * math.pi
 
     @property
     def waist_index(self) -> int:
@@ -306,6 +323,43 @@ class LandmarkLeaf:
         left = SideLandmarks.from_dict(data["left"], "left.") if "left" in data else right
         name = check_name(data.get("name", ""), "name")
         return cls(right, left, name)
+
+
+DRIP_LEAN = 0.5      # the tip-foot tangent leans in by this share of the tip's half-angle
+DRIP_APEX = 1.6      # the apex tangent angle θ_a, in tip half-angles (> 1: a pointed, convex tip end)
+
+
+def drip_tip(length: float, half_width: float, waist: tuple[float, float] = (1.0, 0.0)
+             ) -> tuple[tuple[float, float], float, float]:
+    """The landmarks of a drip tip (Garg & Leow 2011, sec. 3.1, Fig. 7): ``(shoulder,
+    shoulder_angle, theta_a)`` for a :class:`SideLandmarks`.
+
+    The tip is ``length`` long (from y = 1 - length to the apex) and ``half_width`` wide at its
+    foot. With the tip's half-angle γ = atan(half_width / length), the foot landmark's tangent leans
+    in by :data:`DRIP_LEAN` γ from (0, 1) and the apex tangent angle is θ_a = :data:`DRIP_APEX` γ:
+    walking up the right side the margin turns right between the waist and the foot (concave),
+    then left over the tip (convex), and ends in a point. Our construction; the paper shows
+    pictures only.
+
+    Parameters
+    ----------
+    length : float
+        Tip length in leaf lengths, 0 < length < 1 - y_w.
+    half_width : float
+        Half-width at the foot of the tip, 0 < half_width < x_w / 3.
+    waist : (x_w, y_w)
+        The side's waist, for the range checks.
+    """
+    xw, yw = waist
+    length = float(length)
+    half_width = float(half_width)
+    if not (math.isfinite(length) and 0.0 < length < 1.0 - yw):
+        raise ParamError("drip", f"the tip length must lie in (0, 1 - y_w) = (0, {1.0 - yw:.3g}), got {length!r}")
+    if not (math.isfinite(half_width) and 0.0 < half_width < xw / 3.0):
+        raise ParamError("tip_width", f"the tip's half-width must lie in (0, x_w / 3) = (0, {xw / 3.0:.3g}), "
+                         f"got {half_width!r}")
+    gamma = math.atan2(half_width, length)
+    return (half_width, 1.0 - length), math.pi / 2.0 + DRIP_LEAN * gamma, DRIP_APEX * gamma
 
 
 # ---------------------------------------------------------------------------------------------

@@ -42,7 +42,10 @@ __all__ = [
     "KeyframePath",
     "LeafSpace",
     "MorphPath",
+    "NurbsCurve",
+    "arclength_parameter",
     "insertion_error",
+    "key_sizes",
     "keyframe_path",
     "leaf_from_vector",
     "leaf_space",
@@ -251,6 +254,41 @@ def _arclength_inverse(curve: Callable[[ArrayLike], NDArray[np.float64]], sample
     return u, s, float(s[-1])
 
 
+def arclength_parameter(table: ArcTable, t: ArrayLike) -> NDArray[np.float64]:
+    """The curve parameter u at arc-length fractions t ∈ [0, 1] of a path, from its table
+    ``(u, arc length at u, total)``; t = 0 and 1 map exactly to u = 0 and 1."""
+    t = np.clip(np.asarray(t, dtype=np.float64), 0.0, 1.0)
+    u, s, total = table
+    out = np.interp(t * total, s, u) if total > 0 else t
+    return np.where(t <= 0.0, 0.0, np.where(t >= 1.0, 1.0, out))
+
+
+class NurbsCurve:
+    """The rational B-spline of eq. 11 over any key vectors R_0..R_{n+1} (rows of ``vectors``).
+
+    Degree min(2, n + 1) (eq. 11 uses B_{k,2}; two keys give the straight segment), clamped uniform
+    knots so that s(0) = R_0 and s(1) = R_{n+1}, weights ``weights`` (w_0 = w_{n+1} = 1 for a morph
+    path). Positive weights keep s(u) a convex combination of the R_k. :class:`MorphPath` uses it
+    over landmark shape vectors, :mod:`leafview.botany.lobe_morph` over margin control points.
+    """
+
+    def __init__(self, vectors: ArrayLike, weights: ArrayLike) -> None:
+        r = np.asarray(vectors, dtype=np.float64)
+        w = np.asarray(weights, dtype=np.float64)
+        if r.ndim != 2 or len(r) < 2 or w.shape != (len(r),):
+            raise ValueError(f"need (k >= 2, dim) vectors and k weights, got {r.shape} and {w.shape}")
+        m = len(r)
+        self.degree = min(2, m - 1)
+        inner = np.linspace(0.0, 1.0, m - self.degree + 1)[1:-1]
+        self.knots = np.concatenate([np.zeros(self.degree + 1), inner, np.ones(self.degree + 1)])
+        self._num = BSpline(self.knots, w[:, None] * r, self.degree)
+        self._den = BSpline(self.knots, w, self.degree)
+
+    def __call__(self, u: ArrayLike) -> NDArray[np.float64]:
+        u = np.asarray(u, dtype=np.float64)
+        return np.asarray(self._num(u)) / np.asarray(self._den(u))[..., None]
+
+
 @dataclass
 class _Path(ABC):
     """Shared sampling of a path in leaf space; subclasses define :meth:`__call__`."""
@@ -282,14 +320,16 @@ class _Path(ABC):
     def parameter(self, t: ArrayLike, by: str = "arclength") -> NDArray[np.float64]:
         """Curve parameter u for path positions t ∈ [0, 1]: t itself (``by="parameter"``) or the
         u at arc-length fraction t (``"arclength"``, the paper's "regular interval along M")."""
-        t = np.clip(np.asarray(t, dtype=np.float64), 0.0, 1.0)
         if by == "parameter":
-            return t
+            return np.clip(np.asarray(t, dtype=np.float64), 0.0, 1.0)
         if by != "arclength":
             raise ValueError(f"by must be 'arclength' or 'parameter', not {by!r}")
-        u, s, total = self._arc()
-        out = np.interp(t * total, s, u) if total > 0 else t
-        return np.where(t <= 0.0, 0.0, np.where(t >= 1.0, 1.0, out))
+        return arclength_parameter(self._arc(), t)
+
+    @abstractmethod
+    def values_at(self, values: ArrayLike, u: ArrayLike) -> NDArray[np.float64]:
+        """Per-key numbers (one per shape: source, references, target) carried along the path to
+        curve parameters ``u`` the way the shapes are: leaf sizes for growth (Figs 12-13)."""
 
     def frame_vectors(self, frames: int, by: str = "arclength") -> NDArray[np.float64]:
         """``frames`` shape vectors evenly spread along the path (first = source, last = target)."""
@@ -330,18 +370,17 @@ class MorphPath(_Path):
     weights: NDArray[np.float64] = field(default_factory=lambda: np.ones(0))
 
     def __post_init__(self) -> None:
-        r = self.vectors
-        m = len(r)
-        self.degree = min(2, m - 1)
-        inner = np.linspace(0.0, 1.0, m - self.degree + 1)[1:-1]
-        self.knots = np.concatenate([np.zeros(self.degree + 1), inner, np.ones(self.degree + 1)])
-        w = np.asarray(self.weights, dtype=np.float64)
-        self._num = BSpline(self.knots, w[:, None] * r, self.degree)
-        self._den = BSpline(self.knots, w, self.degree)
+        self._curve = NurbsCurve(self.vectors, self.weights)
+        self.degree, self.knots = self._curve.degree, self._curve.knots
 
     def __call__(self, u: ArrayLike) -> NDArray[np.float64]:
-        u = np.asarray(u, dtype=np.float64)
-        return np.asarray(self._num(u)) / np.asarray(self._den(u))[..., None]
+        return self._curve(u)
+
+    def values_at(self, values: ArrayLike, u: ArrayLike) -> NDArray[np.float64]:
+        """Eq. 11 with the path's weights over per-key numbers: a NURBS is variation diminishing,
+        so sizes that grow from key to key grow monotonically along the path."""
+        v = np.asarray(values, dtype=np.float64).reshape(-1, 1)
+        return NurbsCurve(v, self.weights)(u)[..., 0]
 
 
 @dataclass
@@ -354,6 +393,11 @@ class KeyframePath(_Path):
         keys = np.linspace(0.0, 1.0, len(r))
         u = np.asarray(u, dtype=np.float64)
         return np.stack([np.interp(u, keys, r[:, j]) for j in range(r.shape[1])], axis=-1)
+
+    def values_at(self, values: ArrayLike, u: ArrayLike) -> NDArray[np.float64]:
+        """Per-key numbers interpolated linearly between the keys, like the shapes."""
+        v = np.asarray(values, dtype=np.float64).ravel()
+        return np.interp(np.asarray(u, dtype=np.float64), np.linspace(0.0, 1.0, len(v)), v)
 
 
 def _prepare(source: LandmarkLeaf | str, target: LandmarkLeaf | str,
@@ -382,6 +426,30 @@ def _prepare(source: LandmarkLeaf | str, target: LandmarkLeaf | str,
     shapes.append(as_leaf(target, "target"))
     weights.append(1.0)
     return shapes, np.array(weights)
+
+
+def key_sizes(sizes: Sequence[float], ref_weights: Sequence[float], field_name: str = "sizes"
+              ) -> NDArray[np.float64]:
+    """Check leaf sizes given per key shape (source, references..., target: Figs 12-13, growth
+    with size) and keep those of the shapes on the path (a reference of weight 0 is dropped, so is
+    its size). Raises :class:`ParamError` naming ``sizes`` (wrong count) or ``sizes[i]`` (not a
+    finite number > 0)."""
+    try:
+        values = list(sizes)
+    except TypeError:
+        raise ParamError(field_name, f"expected a sequence of leaf sizes, got {type(sizes).__name__}") from None
+    expect = len(ref_weights) + 2
+    if len(values) != expect:
+        raise ParamError(field_name, f"expected {expect} sizes (source, {len(ref_weights)} reference(s), target), "
+                                     f"got {len(values)}")
+    out = []
+    for i, v in enumerate(values):
+        if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) \
+                or not (math.isfinite(float(v)) and float(v) > 0.0):
+            raise ParamError(f"{field_name}[{i}]", f"a leaf size must be a finite number > 0, got {v!r}")
+        out.append(float(v))
+    keep = [0] + [1 + i for i, w in enumerate(ref_weights) if float(w) != 0.0] + [expect - 1]
+    return np.array([out[i] for i in keep])
 
 
 def morph_path(source: LandmarkLeaf | str, target: LandmarkLeaf | str,
