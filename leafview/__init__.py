@@ -6,7 +6,8 @@ The other public modules load on first use, so ``import leafview`` stays light: 
 
 ``evaluate``, ``normals``, ``partials`` and ``tessellate`` give the leaf as the shader draws it: a leaf
 whose venation is on carries the shape its veins give it (Hong 2005, ch. 7; the grid of
-:func:`leafview.venation.vein_grid`), which loads the venation code (scipy) on first use.
+:func:`leafview.venation.vein_grid`), and a lobed leaf is swept between its skeleton and its margin
+(Mündermann et al. 2003); both load scipy on first use.
 """
 
 from __future__ import annotations
@@ -72,29 +73,32 @@ def fbm_noise(n: int, beta: float, seed: int, backend: str = "cpu") -> NDArray[A
     raise ValueError(f"backend must be 'cpu' or 'gpu', got {backend!r}")
 
 
-def _vein_grid(params: LeafParams) -> NDArray[Any] | None:
-    """The vein-shape grid the shader reads for ``params`` (None without venation)."""
-    if not params.venation.enabled:
-        return None
-    grid: NDArray[Any] | None = importlib.import_module("leafview.venation").shape_grid(params)
-    return grid
+def _leaf_surface() -> Any:
+    """:mod:`leafview.botany.leaf_surface` (scipy), loaded on the first evaluation."""
+    return importlib.import_module("leafview.botany.leaf_surface")
 
 
 def evaluate(params: LeafParams, u: Any, v: Any) -> NDArray[Any]:
-    """Leaf-space points at (u, v) (:func:`leafview.deform.surface.evaluate`), veins' shape included."""
-    return _surface.evaluate(params, u, v, vein_grid=_vein_grid(params))
+    """Leaf-space points at (u, v) as the shader draws them: veins' shape included, and a lobed
+    leaf swept from its skeleton (:mod:`leafview.botany.leaf_surface`)."""
+    out: NDArray[Any] = _leaf_surface().evaluate(params, u, v)
+    return out
 
 
 def normals(params: LeafParams, u: Any, v: Any) -> NDArray[Any]:
-    """Unit normals at (u, v) (:func:`leafview.deform.surface.normals`), veins' shape included."""
-    return _surface.normals(params, u, v, vein_grid=_vein_grid(params))
+    """Unit upper-side normals at (u, v) (see :func:`evaluate`)."""
+    out: NDArray[Any] = _leaf_surface().normals(params, u, v)
+    return out
 
 
 def partials(params: LeafParams, u: Any, v: Any) -> _surface.Partials:
-    """Position and derivatives at (u, v) (:func:`leafview.deform.surface.partials`), veins' shape included."""
-    return _surface.partials(params, u, v, vein_grid=_vein_grid(params))
+    """Position and derivatives at (u, v) (see :func:`evaluate`)."""
+    out: _surface.Partials = _leaf_surface().partials(params, u, v)
+    return out
 
 
 def tessellate(params: LeafParams, nu: int = _surface.DEFAULT_GRID[0], nv: int = _surface.DEFAULT_GRID[1]) -> Mesh:
-    """The leaf as a grid mesh (:func:`leafview.deform.surface.tessellate`), veins' shape included."""
-    return _surface.tessellate(params, nu, nv, vein_grid=_vein_grid(params))
+    """The leaf as a mesh: a unilobed leaf on the (nu × nv) grid, a lobed one on its own grid
+    with the paired ties welded (see :func:`evaluate`)."""
+    out: Mesh = _leaf_surface().tessellate(params, nu, nv)
+    return out

@@ -11,6 +11,8 @@
 // the leaf_rows texture (LEAF_ROW_TEXTURE), fetched in those branches only. llvmpipe runs
 // storage-buffer reads as per-vertex gathers; an instanced attribute costs a fraction of that and
 // a texel fetch about half (docs/benchmarks.md).
+// A lobed leaf (leafview.core.lobes) takes the swept surface of leaf_eval.glsl's lobe_eval instead
+// of L_Ω, its v_uv the flat position (x, y in leaf lengths) and no veins.
 // The same program is used with transform feedback (v_object, v_object_normal) by
 // leafview.gpu.evaluate, so what is tested is what is drawn.
 #include "generated/leaf_block.glsl"
@@ -72,16 +74,33 @@ void main() {
     // one half only (shape.half = ±1, e.g. each side of an asymmetric leaf): the grid's u in
     // [-1, 1] spreads over [0, 1] or [-1, 0], u' = (u + half) / 2 (leafview.deform.surface.drawn_uv)
     vec2 uv = in_uv;
-#ifndef LEAF_NO_HALF
-    float half_side = leaf_half(LEAF);
-    if (half_side != 0.0) uv.x = 0.5 * (uv.x + half_side);  // keeps the winding (front faces)
+    vec3 L, n;
+    // a lobed leaf (its sweep-table layer in the branch code): the swept surface on its own grid
+    // (leafview.core.defaults.lobed_grid), shaded at its flat position (x, y in leaf lengths), no veins
+#ifndef LEAF_NO_LOBES
+    int lobe_layer = leaf_branch_lobe(LEAF);
+    if (lobe_layer >= 0) {
+        LobeEval le = lobe_eval(lobe_layer, uv);
+        L = le.L;
+        n = le.N;
+        uv = le.flat_xy;
+    } else
+#else
+    const int lobe_layer = -1;
 #endif
-    LeafEval e = leaf_eval(jitter_table, uv);
-    vec3 n = leaf_normal(e, uv.y);
-    v_object = e.L;
+    {
+#ifndef LEAF_NO_HALF
+        float half_side = leaf_half(LEAF);
+        if (half_side != 0.0) uv.x = 0.5 * (uv.x + half_side);  // keeps the winding (front faces)
+#endif
+        LeafEval e = leaf_eval(jitter_table, uv);
+        L = e.L;
+        n = leaf_normal(e, uv.y);
+    }
+    v_object = L;
     v_object_normal = n;
     // mat4x3: the model matrix's last row holds the texture layers (leafview/gpu/layout.py, LEAF_SLOTS)
-    vec4 world = vec4(mat4x3(LEAF.model) * vec4(e.L, 1.0), 1.0);
+    vec4 world = vec4(mat4x3(LEAF.model) * vec4(L, 1.0), 1.0);
     v_world = world.xyz;
     v_normal = normalize(mat3(LEAF.model) * n);  // rotation and uniform scale only
     v_uv = uv;
@@ -93,6 +112,6 @@ void main() {
 #endif
     gl_Position = frame.proj * frame.view * world;
 #ifndef LEAF_NO_VEINS
-    vein_vertex(leaf_vein_layer(LEAF), length(LEAF.model[0].xyz), gl_Position.w, v_vein, v_vein_style);
+    vein_vertex(lobe_layer >= 0 ? -1 : leaf_vein_layer(LEAF), length(LEAF.model[0].xyz), gl_Position.w, v_vein, v_vein_style);
 #endif
 }

@@ -3,8 +3,9 @@
 // Shader permutations: LEAF_NO_JITTER, LEAF_NO_RIPPLE, LEAF_NO_BEND and LEAF_NO_EXTENDED (and
 // LEAF_NO_HALF in leaf.vert) compile the feature out when no leaf of a draw uses it
 // (leafview.gpu.layout.feature_defines), and LEAF_NO_VEINS the vein-shape grid when no leaf has a
-// vein layer (leafview.gpu.layout.vein_defines); the results are identical for the leaves they
-// are used with.
+// vein layer (leafview.gpu.layout.vein_defines), and LEAF_NO_LOBES the swept surface of lobed
+// leaves (lobe_eval) when no leaf of a draw is lobed (leafview.gpu.layout.lobe_defines); the results
+// are identical for the leaves they are used with.
 // The including shader defines LEAF as the record every vertex reads (the Leaf uniform block, a
 // LeafData row, or the LeafVertex made of instanced vertex attributes: only the LeafVertex members
 // and the branch code are read through it). The members of the optional branches (ripples,
@@ -351,6 +352,93 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
 #endif
     return e;
 }
+
+#ifndef LEAF_NO_LOBES
+// The swept surface of a lobed leaf (Mündermann et al. 2003, secs 3.3-4): railroad ties between the
+// skeleton and the margin, one per texel column of layer `layer` of leaf_lobe_table, in tour order,
+// four texel rows (leafview/deform/sweep.py, table_texels; leafview/gpu/lobe_tables.py):
+// r0 (origin O, margin w), r1 (rim E, length l), r2 (up U, cup), r3 (flat foot k, flat end s).
+// numpy reference: leafview/deform/sweep.py, sweep_eval (a readback test compares the two).
+layout(binding = LOBE_UNIT) uniform sampler2DArray leaf_lobe_table;
+
+struct LobeEval {
+    vec3 L;     // position (leaf space)
+    vec3 Lu;    // dL/du
+    vec3 Lv;    // dL/dv
+    vec3 N;     // upper-side unit normal
+    vec2 flat_xy;  // position on the flat leaf (leaf lengths): the shading coordinates
+};
+
+// the periodic Catmull-Rom of texel row `row` at x = j + f (value q, d/dx dq); past either end of the
+// N ties the row wraps, the margin coordinate (r0.w) gaining 1 per wrap
+void lobe_spline(int layer, int row, int j, float f, int n, out vec4 q, out vec4 dq) {
+    vec4 p[4];
+    for (int k = 0; k < 4; ++k) {
+        int idx = j - 1 + k + n;          // j >= 0: idx >= n - 1 >= 0
+        int wraps = idx / n - 1;
+        p[k] = texelFetch(leaf_lobe_table, ivec3(idx - (idx / n) * n, row, layer), 0);
+        if (row == 0) p[k].w += float(wraps);
+    }
+    vec4 c1 = 0.5 * (p[2] - p[0]);
+    vec4 c2 = p[0] - 2.5 * p[1] + 2.0 * p[2] - 0.5 * p[3];
+    vec4 c3 = 0.5 * (p[3] - p[0]) + 1.5 * (p[1] - p[2]);
+    q = ((c3 * f + c2) * f + c1) * f + p[1];
+    dq = (3.0 * c3 * f + 2.0 * c2) * f + c1;
+}
+
+// P(t, x) = O(x) + t (E(x) - O(x)) + cup l(x) t^2 U(x), t = (u + 1) / 2, x = v N; with the leaf's
+// ripple on, + r(w) c(t) U(x) (Geng, Hu & Zhang 2014, eq. 5 along the margin: the left-side
+// settings, the signal sampled as add_ripple does, tapered on short ties). Normal normalize(Lv x Lu), or U
+// where the tie has no extent.
+LobeEval lobe_eval(int layer, vec2 uv) {
+    int n = textureSize(leaf_lobe_table, 0).x;
+    float t = 0.5 * (uv.x + 1.0);
+    float x = clamp(uv.y, 0.0, 1.0) * float(n);
+    int j = int(floor(x));
+    float f = x - float(j);
+    vec4 o, d_o, e, d_e, up, d_up, fl, d_fl;
+    lobe_spline(layer, 0, j, f, n, o, d_o);
+    lobe_spline(layer, 1, j, f, n, e, d_e);
+    lobe_spline(layer, 2, j, f, n, up, d_up);
+    lobe_spline(layer, 3, j, f, n, fl, d_fl);
+    float cup = texelFetch(leaf_lobe_table, ivec3(0, 2, layer), 0).w;
+    float ln = e.w, dln = d_e.w;
+    LobeEval r;
+    r.L = o.xyz + t * (e.xyz - o.xyz) + (cup * ln * t * t) * up.xyz;
+    r.Lu = 0.5 * ((e.xyz - o.xyz) + (2.0 * cup * ln * t) * up.xyz);
+    r.Lv = float(n) * (d_o.xyz + t * (d_e.xyz - d_o.xyz) + (cup * t * t) * (dln * up.xyz + ln * d_up.xyz));
+#ifndef LEAF_NO_RIPPLE
+    if (leaf_has_ripple(LEAF)) {
+        vec4 rp = ROW_ripple_l;  // P, lambda, k, theta
+        float veins = ROW_leaf_veins;
+        int base = ROW_leaf_signal_row * RIPPLE_SAMPLES;
+        float s = rp.z * veins * o.w + rp.w;
+        vec2 sig;
+        FBM_SAMPLE_PERIODIC(signals, base, RIPPLE_SAMPLES, s, sig);
+        float rw = rp.x * (rp.y + (1.0 - rp.y) * sig.x);
+        float drw = rp.x * (1.0 - rp.y) * sig.y * rp.z * veins;   // dr/dw
+        // the short ties near the base and the tips ripple less: rho(l) = l^2 / (l^2 + l0^2), so a
+        // zero-length tie (the base's) stays flat and the tour closes without a seam
+        const float l0 = 0.05;   // leafview/deform/sweep.py, RIPPLE_TIE
+        float den = ln * ln + l0 * l0;
+        float rho = ln * ln / den;
+        float drho = 2.0 * ln * l0 * l0 / (den * den) * dln;   // d rho / dx
+        float c = 0.5 * t * t * (3.0 - t);
+        float dc = 3.0 * t - 1.5 * t * t;
+        r.L += (rw * c * rho) * up.xyz;
+        r.Lu += (0.5 * rw * dc * rho) * up.xyz;
+        r.Lv += float(n) * ((drw * d_o.w * c * rho + rw * c * drho) * up.xyz + (rw * c * rho) * d_up.xyz);
+    }
+#endif
+    vec3 nrm = cross(r.Lv, r.Lu);
+    float size = length(nrm);
+    float scale = max(length(r.Lu) * length(r.Lv), 1e-30);
+    vec3 upn = up.xyz / max(length(up.xyz), 1e-30);
+    r.N = size > 1e-6 * scale ? nrm / size : upn;
+    r.flat_xy = fl.xy + t * (fl.zw - fl.xy);
+    return r;
+}
+#endif
 
 // Upper-side unit normal normalize(Lv x Lu); at the pinched base/apex Lu vanishes and its limit
 // direction +-Luv is used instead (leafview/deform/surface.py, _normal_from).

@@ -7,8 +7,8 @@
 // x̄s_i cos φ_i n(v̄_i) and a side-independent offset -x̄s_i sin φ_i t(v̄_i) (t the unit axis
 // tangent) goes to sil_tilt; rows 4..N go to sil_axis / sil_heights. numpy reference:
 // axis_frames() and tilt_offsets().
-// It also writes the branch code leaf_branches (ripples, bending, N; leafview.gpu.layout.
-// branch_code), so that the vertex stage knows the branches a leaf takes from the members it reads
+// It also writes the branch code leaf_branches (ripples, bending, N and a lobed leaf's sweep-table
+// layer; leafview.gpu.layout.branch_code), so that the vertex stage knows the branches a leaf takes from the members it reads
 // as vertex attributes.
 layout(local_size_x = 64) in;
 #include "generated/leaf_block.glsl"
@@ -23,7 +23,8 @@ void main() {
     vec3 a1 = leaves[i].a1.xyz, a2 = leaves[i].a2.xyz;
     int rows = leaf_rows(leaves[i]);
     set_leaf_branches(leaves[i], (leaf_ripple_on(leaves[i]) ? LEAF_BRANCH_RIPPLE : 0)
-                                 + (leaf_bend_on(leaves[i]) ? LEAF_BRANCH_BEND : 0) + LEAF_BRANCH_ROWS * rows);
+                                 + (leaf_bend_on(leaves[i]) ? LEAF_BRANCH_BEND : 0) + LEAF_BRANCH_ROWS * rows
+                                 + LEAF_BRANCH_LOBE * (leaf_lobe_layer(leaves[i]) + 1));
     if (rows == 0) {  // the paper's quartic
         for (int k = 0; k < 3; ++k) {
             float vb = leaves[i].vbar[k];

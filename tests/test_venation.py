@@ -188,6 +188,8 @@ def test_parallel_veins_run_base_to_apex(presets):
 def test_every_preset_has_veins_inside_its_blade_quickly(presets):
     worst = 0.0
     for name, p in presets.items():
+        if p.lobes.enabled:   # lobed leaves are swept from a skeleton; their venation stays off
+            continue
         assert p.venation.enabled, name
         check_veins(p)
         T.build_tree.cache_clear()

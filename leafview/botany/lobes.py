@@ -41,6 +41,7 @@ from numpy.typing import NDArray
 from leafview.botany.outline_fit import margin, rows_from_controls
 from leafview.botany.shapes import fit_info, shapes_params
 from leafview.core.limits import MAX_LOBES_PER_SIDE, check_name
+from leafview.core.lobes import MAX_VALLEYS
 from leafview.core.params import LeafParams, Material, ParamError, Transform, _parse_group
 from leafview.deform.surface import control_polygons
 from leafview.inputs import read_toml
@@ -94,6 +95,11 @@ class LobedLeaf:
         Half-width factor of the lateral and terminal lobes (1: the catalogue shape as fitted).
     positions
         Explicit ``(r, θ, l)`` per lateral lobe, replacing eqs 7-9 (user positions).
+    valleys
+        User valley points ``(x, y)`` (sec. 5: "valley points ... may be specified"): each
+        replaces the valley at the nearest corner of the joined margin
+        (:func:`leafview.botany.lobe_outline.lobed_outline`); empty: the crossings of adjacent
+        margins (or the web's margin) form the valleys.
     """
 
     name: str = ""
@@ -112,6 +118,7 @@ class LobedLeaf:
     web_width: float = 1.0
     lobe_width: float = 1.0
     positions: tuple[tuple[float, float, float], ...] = ()
+    valleys: tuple[tuple[float, float], ...] = ()
     material: Material = field(default_factory=Material)
 
     def lobes(self) -> list[LobePlacement]:
@@ -248,13 +255,30 @@ def _bounded(x: float, path: str) -> float:
     return float(x)
 
 
+def _valley_points(value: Any) -> tuple[tuple[float, float], ...]:
+    """The ``valleys`` key: up to MAX_VALLEYS finite [x, y] points (primary-vein units)."""
+    if not isinstance(value, list):
+        raise ParamError("valleys", f"expected a list of [x, y] points, got {type(value).__name__}")
+    if len(value) > MAX_VALLEYS:
+        raise ParamError("valleys", f"{len(value):,} valley points; at most {MAX_VALLEYS}")
+    out = []
+    for i, p in enumerate(value):
+        if not isinstance(p, list) or len(p) != 2:
+            raise ParamError(f"valleys[{i}]", f"expected [x, y], got {p!r}")
+        for j, x in enumerate(p):
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                raise ParamError(f"valleys[{i}][{j}]", f"expected a finite number, got {x!r}")
+        out.append((_bounded(p[0], f"valleys[{i}][0]"), _bounded(p[1], f"valleys[{i}][1]")))
+    return tuple(out)
+
+
 def lobed_from_dict(data: Mapping[str, Any]) -> LobedLeaf:
     """Validate a ``lobed = 1`` document (see ``assets/compound/*.toml``); ParamError names the
     field."""
 
     if not isinstance(data, Mapping) or data.get("lobed") != 1:
         raise ParamError("lobed", "a multilobed leaf file starts with lobed = 1")
-    known = {"lobed", "half", "positions", "material", *_FLOAT_KEYS, *_PAIR_KEYS, *_STR_KEYS}
+    known = {"lobed", "half", "positions", "valleys", "material", *_FLOAT_KEYS, *_PAIR_KEYS, *_STR_KEYS}
     for key in data:
         if key not in known:
             raise ParamError(str(key), f"unknown key (known: {', '.join(sorted(known))})")
@@ -294,6 +318,8 @@ def lobed_from_dict(data: Mapping[str, Any]) -> LobedLeaf:
                     raise ParamError(f"positions[{i}][{j}]", f"expected a finite number, got {x!r}")
         kw["positions"] = tuple(tuple(_bounded(x, f"positions[{i}][{j}]") for j, x in enumerate(row))
                                 for i, row in enumerate(pos))
+    if "valleys" in data:
+        kw["valleys"] = _valley_points(data["valleys"])
     if "material" in data:
         kw["material"] = _parse_group(Material, data["material"], "material", required=False)
     leaf = LobedLeaf(**kw)

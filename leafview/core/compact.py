@@ -38,6 +38,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from leafview.core.limits import BYTES_PER_LEAF_PARAMS, MAX_LEAVES, check_count, check_memory
+from leafview.core.lobes import Lobes, lobes_dict
 from leafview.core.params import (
     SCHEMA_VERSION,
     LeafParams,
@@ -45,7 +46,6 @@ from leafview.core.params import (
     parse_params,
     split_omega,
 )
-from leafview.core.lobes import Lobes, lobes_dict
 from leafview.core.venation import Venation, venation_dict
 from leafview.inputs import parse_json
 

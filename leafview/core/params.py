@@ -37,8 +37,8 @@ from leafview.core.bezier import derivative_points, evaluate_curve
 from leafview.core.display import png_of
 from leafview.core.fieldspec import FieldSpec, check_choice, check_range, number, spec_field
 from leafview.core.limits import MAX_SILHOUETTE_ROWS, check_name
-from leafview.core.texture import LeafTexture, parse_texture
 from leafview.core.lobes import BranchTurtle, Lobes, lobes_dict, parse_lobes_field
+from leafview.core.texture import LeafTexture, parse_texture
 from leafview.core.venation import VeinEdit, Venation, parse_edits, venation_dict
 from leafview.errors import ParamError
 
@@ -505,7 +505,7 @@ def _parse_group(cls: type, data: Any, group: str, *, required: bool) -> Any:
     for key in data:
         if key not in known:
             raise ParamError(f"{group}.{key}", f"unknown key (known: {', '.join(known)})")
-    values = {}
+    values: dict[str, Any] = {}
     rows = 3
     for name, f in known.items():  # silhouette comes before the per-row fields
         path = f"{group}.{name}"

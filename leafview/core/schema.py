@@ -31,12 +31,20 @@ from dataclasses import MISSING, fields
 from typing import Any
 
 from leafview.core import params as P
+from leafview.core.bspline import MAX_CONTROLS, MIN_CONTROLS
 from leafview.core.compact import COMPACT_VERSION, OPTIONAL_GROUPS
 from leafview.core.limits import MAX_NAME_CHARS
+from leafview.core.lobes import (
+    MAX_BRANCHES,
+    MAX_VALLEYS,
+    OUTLINE_LIMIT,
+    TURTLE_KNOTS,
+    BranchTurtle,
+    Lobes,
+    lobes_dict,
+    turtle_specs,
+)
 from leafview.core.texture import MAX_TEXTURE_PATH
-from leafview.core.bspline import MAX_CONTROLS, MIN_CONTROLS
-from leafview.core.lobes import (MAX_BRANCHES, MAX_VALLEYS, OUTLINE_LIMIT, TURTLE_KNOTS, BranchTurtle, Lobes, lobes_dict,
-                                 turtle_specs)
 from leafview.core.venation import MAX_EDITS, VeinEdit, Venation, edit_specs, venation_dict
 
 __all__ = ["SCHEMA_ID", "DIALECT", "compact_schema", "compact_leaf_schema", "doc_line", "leaf_schema"]

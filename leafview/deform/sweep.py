@@ -27,6 +27,16 @@ table pairs, meet without a crack):
 O, E, U, ℓ the splines of origin, rim, up and length; ``cup`` cups the ties (0: the straight
 generating line). The upper-side normal is normalize(∂P/∂v × ∂P/∂u), or U where the tie has no
 extent (at a skeleton tip, where the foot turns back).
+
+Ripples along the lobes' margins (Geng, Hu & Zhang 2014, eq. 5, as for unilobed leaves in
+:func:`leafview.deform.surface.evaluate`): with the leaf's ripple on, each tie is a cantilever from
+the skeleton loaded at the margin, D = r(w) c(t) U(x) with r = P [λ + (1 - λ) N(k · veins · w + θ)]
+(the left-side (u >= 0) settings, N the leaf's fBm signal), c(t) = t² (3 - t) / 2, w the margin
+coordinate along the tour (unwrapped: it gains 1 per turn), tapered by ρ(ℓ) = ℓ² / (ℓ² + ℓ0²) on
+short ties (ℓ0 = :data:`RIPPLE_TIE`).
+
+A lobed leaf is drawn on :func:`lobed_grid` of the grid asked for: the same ties-per-tie count
+u, and every 1st, 2nd or 4th tie along v, so that paired feet stay on grid rows.
 """
 
 from __future__ import annotations
@@ -36,9 +46,34 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["SWEEP_ROWS", "SweepTable", "SweepEval", "sweep_eval", "catmull_rom_periodic", "table_texels"]
+from leafview.core.params import Ripple
+from leafview.deform.fbm import ripple_signal, sample_periodic
 
+__all__ = ["SWEEP_ROWS", "RIPPLE_TIE", "ROW_STEPS", "SweepTable", "SweepEval", "sweep_eval", "catmull_rom_periodic",
+           "table_texels", "lobed_grid"]
+
+RIPPLE_TIE = 0.05    # leaf lengths: ties shorter than this ripple less (ρ(ℓ) of _add_margin_ripple)
 SWEEP_ROWS = 256     # ties per table: a multiple of 4, so grids of N/2 and N/4 rows keep the pairing
+ROW_STEPS = (1, 2, 4)   # ties between the rows of a lobed grid
+MAX_TIE_SAMPLES = 9     # samples along a tie, at most
+
+
+def lobed_grid(grid: tuple[int, int], ties: int = SWEEP_ROWS) -> tuple[int, int]:
+    """The grid a lobed leaf is drawn on when ``grid`` (nu, nv) is asked for, with about as many
+    vertices: ``ties / step + 1`` rows along the tour for a step of :data:`ROW_STEPS` (so rows land
+    on ties) and 2 to min(nu, :data:`MAX_TIE_SAMPLES`) samples along each tie (a tie is straight
+    unless cupped, rippled or turned, so the margin gets the vertices). The nearest count wins, the
+    finer tour on a tie."""
+    nu, nv = int(grid[0]), int(grid[1])
+    want = nu * nv
+    best: tuple[int, int] | None = None
+    for step in ROW_STEPS:
+        rows = ties // step + 1
+        nt = int(min(max(round(want / rows), 2), max(min(nu, MAX_TIE_SAMPLES), 2)))
+        if best is None or abs(nt * rows - want) < abs(best[0] * best[1] - want):
+            best = (nt, rows)
+    assert best is not None
+    return best
 
 
 @dataclass(frozen=True)
@@ -111,9 +146,10 @@ def catmull_rom_periodic(q: ArrayLike, x: ArrayLike, *, period_offset: ArrayLike
     return value, slope
 
 
-def sweep_eval(table: SweepTable, uv: ArrayLike) -> SweepEval:
+def sweep_eval(table: SweepTable, uv: ArrayLike, ripple: Ripple | None = None) -> SweepEval:
     """The lobed surface at grid coordinates ``uv`` (n, 2): t = (u + 1) / 2 along the tie, x = v N
-    along the tour (see the module docstring)."""
+    along the tour (see the module docstring); ``ripple`` (the leaf's, when enabled) ripples the
+    margins."""
     uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
     n = table.rows
     t = 0.5 * (uv[:, 0] + 1.0)
@@ -123,7 +159,7 @@ def sweep_eval(table: SweepTable, uv: ArrayLike) -> SweepEval:
     up, dup = catmull_rom_periodic(table.up, x)
     ln, dln = catmull_rom_periodic(table.length, x)
     fl, _ = catmull_rom_periodic(table.flat, x)
-    w, _ = catmull_rom_periodic(table.margin, x, period_offset=1.0)
+    w, dw = catmull_rom_periodic(table.margin, x, period_offset=1.0)
     tt = t[:, None]
     cup = table.cup
     L = o + tt * (e - o) + (cup * ln * t * t)[:, None] * up
@@ -131,6 +167,8 @@ def sweep_eval(table: SweepTable, uv: ArrayLike) -> SweepEval:
     dx = do + tt * (de - do) + (cup * t * t)[:, None] * (dln[:, None] * up + ln[:, None] * dup)
     Lu = 0.5 * dt
     Lv = n * dx
+    if ripple is not None and ripple.enabled:
+        L, Lu, Lv = _add_margin_ripple(ripple, t, w, dw, up, dup, ln, dln, n, L, Lu, Lv)
     nrm = np.cross(Lv, Lu)
     size = np.linalg.norm(nrm, axis=1)
     scale = np.maximum(np.linalg.norm(Lu, axis=1) * np.linalg.norm(Lv, axis=1), 1e-30)
@@ -139,3 +177,26 @@ def sweep_eval(table: SweepTable, uv: ArrayLike) -> SweepEval:
     normal = np.where(ok[:, None], nrm / np.where(ok, size, 1.0)[:, None], upn)
     flat = fl[:, :2] + tt * (fl[:, 2:] - fl[:, :2])
     return SweepEval(L, Lu, Lv, normal, flat, np.mod(w, 1.0))
+
+
+def _add_margin_ripple(rip: Ripple, t: NDArray[np.float64], w: NDArray[np.float64], dw: NDArray[np.float64],
+                       up: NDArray[np.float64], dup: NDArray[np.float64], ln: NDArray[np.float64],
+                       dln: NDArray[np.float64], n: int, L: NDArray[np.float64],
+                       Lu: NDArray[np.float64], Lv: NDArray[np.float64]
+                       ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """D = r(w) c(t) ρ(ℓ) U(x) (see the module docstring), ρ(ℓ) = ℓ² / (ℓ² + ℓ0²) with ℓ0 =
+    :data:`RIPPLE_TIE` (short ties ripple less; the base's zero-length tie not at all, so the tour
+    closes without a seam), added to L and its partials; ``w``, ``dw`` the
+    unwrapped margin coordinate and dw/dx, ``up``, ``dup`` U and dU/dx. The twin of the lobed
+    branch's ripple in ``shaders/leaf_eval.glsl`` (the signal sampled as ``add_ripple`` does)."""
+    amp, lam, k, theta = (float(getattr(rip, name)[0]) for name in ("amplitude", "fluctuation", "interval", "phase"))
+    n_val, n_slope = sample_periodic(ripple_signal(rip.beta, rip.seed), k * rip.veins * w + theta)
+    r = amp * (lam + (1.0 - lam) * n_val)
+    dr = amp * (1.0 - lam) * n_slope * k * rip.veins          # dr/dw
+    den = ln * ln + RIPPLE_TIE**2
+    rho = ln * ln / den                                      # short ties ripple less, the base's not at all
+    drho = 2.0 * ln * RIPPLE_TIE**2 / (den * den) * dln      # d rho / dx
+    c = 0.5 * t * t * (3.0 - t)
+    dc = 3.0 * t - 1.5 * t * t
+    return (L + (r * c * rho)[:, None] * up, Lu + (0.5 * r * dc * rho)[:, None] * up,
+            Lv + n * ((dr * dw * c * rho + r * c * drho)[:, None] * up + (r * c * rho)[:, None] * dup))

@@ -39,15 +39,18 @@ from leafview.gpu.frame import FrameUniforms, Lighting
 from leafview.gpu.layout import (
     LEAF_BLOCK,
     LEAVES_BINDING,
+    NO_LOBE_DEFINES,
     NO_VEIN_DEFINES,
     PLAIN_DEFINES,
     feature_defines,
+    lobe_defines,
     needs_row_texture,
     pack_leaves,
     texture_defines,
     vein_defines,
 )
 from leafview.gpu.limits import capture_bytes, check_buffer, check_grid, ensure_alive
+from leafview.gpu.lobe_tables import LobeTables
 from leafview.gpu.owner import GLObjects
 from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, Grid, JitterTable, RowTexture, record_vertex_array
 from leafview.gpu.targets import OffscreenTarget, read_rgba
@@ -199,13 +202,17 @@ class InstancedLeaves(_Batch):
         The vein textures of the records' vein layers (the caller's: ``layers =
         veins.update(params)``, then ``pack_leaves(params, vein_layers=layers)``); ``None``: no
         leaf shows veins.
+    lobes:
+        The sweep tables of the records' lobe layers (the caller's: ``layers =
+        lobes.update(params)``, then ``pack_leaves(params, lobe_layers=layers)``; lobed leaves want
+        a grid of :func:`~leafview.gpu.lobe_tables.lobed_grid`); ``None``: every leaf drawn unlobed.
     """
 
     def __init__(self, ctx: moderngl.Context, records: Any, grid: tuple[int, int] = (9, 15), *,
                  jitter_tables: ArrayLike | None = None,
                  ripple_signals: Sequence[tuple[int, float]] = (),
                  resources: GpuResources | None = None, textures: LeafTextures | None = None,
-                 veins: VeinDraw | None = None) -> None:
+                 veins: VeinDraw | None = None, lobes: LobeTables | None = None) -> None:
         recs = self.records = _as_records(records)
         self.count = int(recs.shape[0])
         ensure_alive(ctx, "uploading instanced leaves")
@@ -222,10 +229,12 @@ class InstancedLeaves(_Batch):
             self.nu, self.nv = grid
             self.textures = textures
             self.veins = veins if veins is not None and veins.active else None
+            self.lobes = lobes if lobes is not None and lobes.active else None
             plain = textures is None or textures.texture is None
             self.program = self.resources.leaf_program(
                 {"LEAF_INSTANCED": 1, **feature_defines(recs), **(PLAIN_DEFINES if plain else texture_defines(recs)),
-                 **(NO_VEIN_DEFINES if self.veins is None else vein_defines(recs))},
+                 **(NO_VEIN_DEFINES if self.veins is None else vein_defines(recs)),
+                 **(NO_LOBE_DEFINES if self.lobes is None else lobe_defines(recs))},
                 varyings=WORLD_VARYINGS)
             self.ssbo = self._own(ctx.buffer(recs.tobytes() if self.count else bytes(LEAF_BLOCK.nbytes)))
             self.resources.prepare.run(self.ssbo, self.count)  # derived per-leaf fields, one dispatch
@@ -254,6 +263,8 @@ class InstancedLeaves(_Batch):
             self.textures.use()
         if self.veins is not None:
             self.veins.use()
+        if self.lobes is not None:
+            self.lobes.use()
 
     def draw(self) -> None:
         """All leaves, one instanced draw, into the bound framebuffer (depth test on)."""

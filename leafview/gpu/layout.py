@@ -12,7 +12,7 @@
   and Python binds with the same constant; no other file holds a binding number.
 * **Packed fields**: spare vec4 components that hold a number of their own (the drawn half in
   ``back.w``, the signal row in ``deform.w``, the silhouette row count in ``tilt.w``, the texture
-  layers in the model matrix's last row...) are declared as :data:`LEAF_SLOTS`. GLSL reads them through generated accessors
+  layers in the model matrix's last row, a lobed leaf's sweep-table layer in ``vbar.w``...) are declared as :data:`LEAF_SLOTS`. GLSL reads them through generated accessors
   (``leaf_half(rec)``); Python writes and reads them through :func:`write_slot` /
   :func:`read_slot`, the numpy twins the readback test compares with.
 
@@ -50,11 +50,12 @@ __all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "SPECIES_CULL_BLOCK", "DRAW_COM
            "SPECIES_BINDING", "COMMANDS_BINDING", "VISIBLE_BINDING", "FBM_JOBS_BINDING", "READBACK_BINDING",
            "VERTICES_BINDING", "JITTER_UNIT", "ATLAS_UNIT", "ROWS_UNIT", "TEXTURE_UNIT", "VEIN_FIELD_UNIT",
            "VEIN_GRID_UNIT", "VEIN_STYLE_UNIT", "VEIN_SEGMENTS_BINDING", "VEIN_TEXELS_BINDING",
-           "VEIN_TILES_BINDING", "VEIN_FIELD_SAMPLER", "VEIN_GRID_SAMPLER",
-           "Slot", "LEAF_SLOTS", "BRANCH_RIPPLE", "BRANCH_BEND", "BRANCH_ROWS", "branch_code", "without_derived", "PAIR_MEMBERS", "read_slot", "write_slot", "read_pair", "accessors_glsl",
+           "VEIN_TILES_BINDING", "VEIN_FIELD_SAMPLER", "VEIN_GRID_SAMPLER", "LOBE_UNIT", "LOBE_SAMPLER",
+           "Slot", "LEAF_SLOTS", "BRANCH_RIPPLE", "BRANCH_BEND", "BRANCH_ROWS", "BRANCH_LOBE", "branch_code", "branch_parts", "without_derived", "PAIR_MEMBERS", "read_slot", "write_slot", "read_pair", "accessors_glsl",
            "struct_from_dtype", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources",
            "texture_keys", "texture_layers", "write_texture_layers", "texture_defines", "PLAIN_DEFINES",
            "write_vein_layers", "vein_defines", "NO_VEIN_DEFINES", "VEIN_SKIN_DEFINES",
+           "write_lobe_layers", "lobe_defines", "NO_LOBE_DEFINES", "LOBE_TABLE_ROWS",
            "AovOutput", "AOV_OUTPUTS", "LEAF_OFFSET_UNIFORM", "aov_outputs_glsl",
            "LEAF_VERTEX_BLOCK", "LeafAttribute", "LEAF_ATTRIBUTES", "MAX_VERTEX_ATTRIBUTES", "attribute_format",
            "attributes_glsl", "vertex_records", "ROW_TEXELS", "ROWS_PER_LINE", "MAX_TEXTURE_SIZE", "row_texture_size",
@@ -217,10 +218,17 @@ TEXTURE_UNIT = 3         # sampler leaf_textures: the leaves' image textures, on
 VEIN_FIELD_UNIT = 4      # sampler leaf_vein_field: the vein fields (distance, order, width), one layer per key
 VEIN_GRID_UNIT = 5       # sampler leaf_vein_grid: the vein-shape grids (displacement, ripple coordinate)
 VEIN_STYLE_UNIT = 6      # sampler leaf_vein_style: venation contrast and relief, one texel per vein layer
+LOBE_UNIT = 7            # sampler leaf_lobe_table: the lobed leaves' sweep tables, one array layer per table
 VEIN_FIELD_SAMPLER = "leaf_vein_field"
 """GLSL name of the ``sampler2DArray`` at :data:`VEIN_FIELD_UNIT` (``shaders/leaf_veins.glsl``)."""
 VEIN_GRID_SAMPLER = "leaf_vein_grid"
 """GLSL name of the ``sampler2DArray`` at :data:`VEIN_GRID_UNIT` (``shaders/leaf_eval.glsl``)."""
+LOBE_SAMPLER = "leaf_lobe_table"
+"""GLSL name of the ``sampler2DArray`` at :data:`LOBE_UNIT` (``shaders/leaf_eval.glsl``): RGBA32F,
+width N (the railroad ties of :mod:`leafview.deform.sweep`), :data:`LOBE_TABLE_ROWS` texel rows
+(``table_texels``; row 2's spare w holds the table's cup), one layer per lobed table
+(:mod:`leafview.gpu.lobe_tables`)."""
+LOBE_TABLE_ROWS = 4
 
 
 @dataclass(frozen=True)
@@ -258,6 +266,7 @@ BINDINGS: tuple[Binding, ...] = (
     Binding("VEIN_FIELD_UNIT", VEIN_FIELD_UNIT, "sampler", VEIN_FIELD_SAMPLER, "vein fields (leafview/gpu/vein_field.py)"),
     Binding("VEIN_GRID_UNIT", VEIN_GRID_UNIT, "sampler", VEIN_GRID_SAMPLER, "vein-shape grids (leafview/gpu/vein_field.py)"),
     Binding("VEIN_STYLE_UNIT", VEIN_STYLE_UNIT, "sampler", "leaf_vein_style", "contrast, relief per vein layer"),
+    Binding("LOBE_UNIT", LOBE_UNIT, "sampler", LOBE_SAMPLER, "lobed leaves' sweep tables (leafview/gpu/lobe_tables.py)"),
 )
 
 
@@ -353,11 +362,15 @@ LEAF_SLOTS: tuple[Slot, ...] = (
     # and the third: the leaf's layer of the vein field and vein-shape grid arrays
     # (leafview/gpu/vein_field.py), -1 without veins, stored plus one like the texture layers
     Slot("leaf_vein_layer", "model", 3, "layer", "vein field / grid layer, -1 without veins", column=2),
+    # a lobed leaf's layer of the sweep-table array (leafview/gpu/lobe_tables.py), -1 unlobed, in the
+    # spare w of the silhouette feet (rows 1-3 use xyz). The vertex stage does not read vbar: the
+    # prepare pass folds the layer into leaf_branches (BRANCH_LOBE), read as leaf_branch_lobe(rec).
+    Slot("leaf_lobe_layer", "vbar", 3, "layer", "sweep-table layer of a lobed leaf, -1 unlobed"),
     # spare components of the members read as vertex attributes (LEAF_VERTEX_BLOCK), so that the
     # vertex stage learns which branches a leaf takes, and a scene's vertex record its row,
     # without reading the storage buffer:
-    Slot("leaf_branches", "a1", 3, "int", "BRANCH_RIPPLE + BRANCH_BEND + BRANCH_ROWS * N (leaf_prepare.comp)",
-         derived=True),
+    Slot("leaf_branches", "a1", 3, "int", "BRANCH_RIPPLE + BRANCH_BEND + BRANCH_ROWS * N + BRANCH_LOBE * "
+         "(lobe layer + 1) (leaf_prepare.comp)", derived=True),
     Slot("leaf_vertex_row", "a2", 3, "int", "a scene's vertex record: the leaf's row in its batch (scene_compact.comp)",
          derived=True),
 )
@@ -413,14 +426,25 @@ def write_slot(record: np.ndarray, accessor: str, value: ArrayLike) -> None:
 BRANCH_RIPPLE = 1   # ripples on (leaf_ripple_on)
 BRANCH_BEND = 2     # bending on (leaf_bend_on)
 BRANCH_ROWS = 4     # times the silhouette rows N of an extended leaf (leaf_rows), 0 otherwise
+BRANCH_LOBE = BRANCH_ROWS * (MAX_SILHOUETTE_ROWS + 1)   # times the lobe layer + 1 (leaf_lobe_layer), 0 unlobed
+_MAX_BRANCH_CODE = 1 << 24   # the code is a float32 component: exact integers up to 2^24
 
 
 def branch_code(records: np.ndarray) -> NDArray[np.int32]:
     """What ``leaf_prepare.comp`` writes to ``leaf_branches`` of each record (the numpy twin)."""
     code = (BRANCH_RIPPLE * read_slot(records, "leaf_ripple_on").astype(np.int32)
             + BRANCH_BEND * read_slot(records, "leaf_bend_on").astype(np.int32)
-            + BRANCH_ROWS * read_slot(records, "leaf_rows"))
+            + BRANCH_ROWS * read_slot(records, "leaf_rows")
+            + BRANCH_LOBE * (read_slot(records, "leaf_lobe_layer") + 1))
     return np.asarray(code, np.int32)
+
+
+def branch_parts(code: ArrayLike) -> dict[str, NDArray[np.int32]]:
+    """The branch code decoded as the generated GLSL macros decode it (``leaf_has_ripple``,
+    ``leaf_has_bend``, ``leaf_branch_rows``, ``leaf_branch_lobe``): the numpy twin of the decoding."""
+    c = np.asarray(code, np.int32)
+    return {"ripple": (c & BRANCH_RIPPLE != 0).astype(np.int32), "bend": (c & BRANCH_BEND != 0).astype(np.int32),
+            "rows": (c % BRANCH_LOBE) // BRANCH_ROWS, "lobe": c // BRANCH_LOBE - 1}
 
 
 def without_derived(records: np.ndarray) -> NDArray[Any]:
@@ -446,10 +470,11 @@ def accessors_glsl() -> str:
     lines = ["// generated from leafview/gpu/layout.py: packed fields of LeafData"]
     lines += [slot.glsl() for slot in LEAF_SLOTS]
     lines += [f"#define LEAF_BRANCH_RIPPLE {BRANCH_RIPPLE}", f"#define LEAF_BRANCH_BEND {BRANCH_BEND}",
-              f"#define LEAF_BRANCH_ROWS {BRANCH_ROWS}",
+              f"#define LEAF_BRANCH_ROWS {BRANCH_ROWS}", f"#define LEAF_BRANCH_LOBE {BRANCH_LOBE}",
               "#define leaf_has_ripple(rec) ((leaf_branches(rec) & LEAF_BRANCH_RIPPLE) != 0)",
               "#define leaf_has_bend(rec) ((leaf_branches(rec) & LEAF_BRANCH_BEND) != 0)",
-              "#define leaf_branch_rows(rec) (leaf_branches(rec) / LEAF_BRANCH_ROWS)"]
+              "#define leaf_branch_rows(rec) ((leaf_branches(rec) % LEAF_BRANCH_LOBE) / LEAF_BRANCH_ROWS)",
+              "#define leaf_branch_lobe(rec) (leaf_branches(rec) / LEAF_BRANCH_LOBE - 1)"]
     # one vec4 load per pair: the element is passed by value to a helper that picks its half (a
     # macro that indexed the member in both branches made llvmpipe gather the element twice)
     lines.append("vec2 leafview_pair_half(vec4 element, int j) { return (j % 2 == 0) ? element.xy : element.zw; }")
@@ -459,12 +484,14 @@ def accessors_glsl() -> str:
 
 
 def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: int = 0,
-              layers: tuple[int, int] = (-1, -1), vein_layer: int = -1) -> np.ndarray:
+              layers: tuple[int, int] = (-1, -1), vein_layer: int = -1, lobe_layer: int = -1) -> np.ndarray:
     """Fill a LEAF_BLOCK record from ``params`` (float32, std140 = std430); ``ripple_row`` is the
     row of the ripple signal buffer holding this leaf's ``(seed, beta)`` signal, ``layers`` the
     layers of its front and back images in the draw's array texture (-1: untextured; see
     :func:`texture_layers`), ``vein_layer`` its layer of the draw's vein field and grid arrays
-    (-1: no veins; ``VeinFields.layers`` of leafview.gpu.vein_field). Packed fields are written through :func:`write_slot` (the GLSL side
+    (-1: no veins; ``VeinFields.layers`` of leafview.gpu.vein_field), ``lobe_layer`` its layer of the
+    draw's sweep-table array (-1: drawn as an unlobed leaf; ``LobeTables.update`` of
+    leafview.gpu.lobe_tables). Packed fields are written through :func:`write_slot` (the GLSL side
     reads them with the accessors)."""
     rec = LEAF_BLOCK.zeros() if out is None else out
     s, j, m = params.shape, params.jitter, params.material
@@ -500,6 +527,7 @@ def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: 
     rec["model"] = params.transform.matrix().T  # column-major for GLSL
     write_texture_layers(rec, layers)           # the matrix's last row (after the matrix itself)
     write_vein_layers(rec, vein_layer)
+    write_lobe_layers(rec, lobe_layer)
     rip, bend = params.ripple, params.bending
     write_slot(rec, "leaf_ripple_on", float(rip.enabled))
     write_slot(rec, "leaf_bend_on", float(bend.active))
@@ -544,6 +572,17 @@ def vein_defines(records: np.ndarray) -> dict[str, int]:
     recs = np.atleast_1d(records)
     return {} if (read_slot(recs, "leaf_vein_layer") >= 0).any() else dict(NO_VEIN_DEFINES)
 
+
+def lobe_defines(records: np.ndarray) -> dict[str, int]:
+    """``LEAF_NO_LOBES`` when no record of a draw is lobed (no ``leaf_lobe_layer``): the vertex stage
+    then has no sweep branch and reads no sweep table. Apart from :func:`feature_defines` (whose
+    permutations the full program is compared with): every program without it keeps the branch."""
+    recs = np.atleast_1d(records)
+    return {} if (read_slot(recs, "leaf_lobe_layer") >= 0).any() else dict(NO_LOBE_DEFINES)
+
+
+NO_LOBE_DEFINES: Mapping[str, int] = MappingProxyType({"LEAF_NO_LOBES": 1})
+"""The define of a draw without lobed leaves (no sweep table bound)."""
 
 NO_VEIN_DEFINES: Mapping[str, int] = MappingProxyType({"LEAF_NO_VEINS": 1})
 """The define of a draw with no vein field bound (stems, baked leaves, ``--veins off``)."""
@@ -622,6 +661,15 @@ def write_vein_layers(records: np.ndarray, layers: ArrayLike) -> None:
     write_slot(records, "leaf_vein_layer", np.asarray(layers, np.int32))
 
 
+def write_lobe_layers(records: np.ndarray, layers: ArrayLike) -> None:
+    """Store sweep-table ``layers`` (one int, or (N,) for N records; -1 unlobed) in the records'
+    ``leaf_lobe_layer`` slot; the prepare pass folds them into ``leaf_branches``."""
+    lobes = np.asarray(layers, np.int32)
+    if (lobes >= 0).any() and int(lobes.max() + 1) * BRANCH_LOBE >= _MAX_BRANCH_CODE:
+        raise ValueError(f"lobe layer {int(lobes.max())} does not fit the branch code")
+    write_slot(records, "leaf_lobe_layer", lobes)
+
+
 def ripple_keys(params: Iterable[LeafParams]) -> list[tuple[int, float]]:
     """The distinct ``(seed, beta)`` ripple signals of leaves with ripples on, in order of first
     use: row i of the signal buffer holds ``keys[i]`` (the rows :func:`pack_leaves` assigns)."""
@@ -633,12 +681,14 @@ def ripple_keys(params: Iterable[LeafParams]) -> list[tuple[int, float]]:
 
 
 def pack_leaves(params: Iterable[LeafParams], *, textures: Sequence[str] | None = None,
-                vein_layers: ArrayLike | None = None) -> tuple[NDArray[Any], NDArray[np.float32]]:
+                vein_layers: ArrayLike | None = None, lobe_layers: ArrayLike | None = None
+                ) -> tuple[NDArray[Any], NDArray[np.float32]]:
     """LEAF_BLOCK records (N,) for ``params`` and the jitter table rows they index: one row of
     :data:`JITTER_TABLE_SIZE` values per distinct seed among leaves with jitter on (at least one
     row). ``leaf_jitter_row`` of each record is its row; the texture layers are those of an array
     texture holding ``textures`` (default :func:`texture_keys` of ``params``), the vein layers
-    ``vein_layers`` ((N,) or one int; default -1, no veins: ``VeinFields.layers``)."""
+    ``vein_layers`` ((N,) or one int; default -1, no veins: ``VeinFields.layers``), the sweep-table
+    layers ``lobe_layers`` ((N,) or one int; default -1, every leaf unlobed: ``LobeTables.update``)."""
     params = list(params)
     recs = np.zeros(len(params), dtype=LEAF_BLOCK.dtype)
     rows: dict[int, int] = {}
@@ -656,6 +706,8 @@ def pack_leaves(params: Iterable[LeafParams], *, textures: Sequence[str] | None 
             write_slot(recs[i], "leaf_jitter_row", float(row))
     if vein_layers is not None:
         write_vein_layers(recs, np.broadcast_to(np.asarray(vein_layers, np.int32), (len(params),)))
+    if lobe_layers is not None:
+        write_lobe_layers(recs, np.broadcast_to(np.asarray(lobe_layers, np.int32), (len(params),)))
     table = np.stack(tables) if tables else np.zeros((1, JITTER_TABLE_SIZE), np.float32)
     return recs, table.astype(np.float32)
 

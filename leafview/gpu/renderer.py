@@ -15,6 +15,11 @@ set it false: no leaf shows veins, as if its venation were disabled). :meth:`Lea
 viewer's path) also draws the veins as geometry (:class:`~leafview.gpu.vein_tubes.VeinTubes`, Hong
 2005, ch. 6.1) wherever they are at least a pixel wide on screen; stills at thumbnail sizes have none
 that wide.
+
+Lobed leaves (``LeafParams.lobes``): drawn and captured by the same vertex shader from their sweep
+tables (:class:`~leafview.gpu.lobe_tables.LobeTables`, one for the single leaf and one for
+batches), on the lobed grid of the grid asked for (:func:`~leafview.gpu.lobe_tables.lobed_grid`),
+without veins.
 """
 
 from __future__ import annotations
@@ -37,7 +42,9 @@ from leafview.gpu.layout import (
     FRAME_BLOCK,
     LEAF_BINDING,
     LEAF_BLOCK,
+    NO_LOBE_DEFINES,
     feature_defines,
+    lobe_defines,
     pack_leaf,
     pack_leaves,
     read_slot,
@@ -57,6 +64,7 @@ from leafview.gpu.limits import (
     context_alive,
     ensure_alive,
 )
+from leafview.gpu.lobe_tables import LobeTables, is_lobed, lobed_grid
 from leafview.gpu.owner import GLObjects, GrowingBuffer
 from leafview.gpu.prepare import LeafPrepare
 from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, JitterTable
@@ -116,6 +124,8 @@ class LeafRenderer:
             self.textures = self._objects.own(LeafTextures(self.ctx))
             self.leaf_veins = self._objects.own(VeinDraw(self.ctx, self.resources.programs))    # set_leaf's leaf
             self.batch_veins = self._objects.own(VeinDraw(self.ctx, self.resources.programs))   # render_many's chunks
+            self.leaf_lobes = self._objects.own(LobeTables(self.ctx))     # set_leaf's leaf, when lobed
+            self.batch_lobes = self._objects.own(LobeTables(self.ctx))    # render_many's chunks
             self.vein_tubes = self._objects.own(VeinTubes(self.ctx, resources=self.resources))  # draw's close-ups
             self.leaf_ubo = self._objects.own(self.ctx.buffer(reserve=LEAF_BLOCK.nbytes))
             self.frame = self._objects.own(FrameUniforms(self.ctx))
@@ -134,6 +144,8 @@ class LeafRenderer:
         self.veins = True  # leaves whose venation is enabled show veins (False: none does)
         self.veins_pending: LeafParams | None = None   # set_leaf(defer_veins=True)'s leaf, veins not rebuilt yet
         self._vein_layer = -1
+        self.lobed = False  # the leaf last given to set_leaf is lobed (drawn on lobed_grid)
+        self._draw_defines: dict[str, int] = dict(NO_LOBE_DEFINES)   # draw's variant: no sweep branch unless lobed
 
     # -- lifetime -------------------------------------------------------------------------------
     def release(self) -> None:
@@ -182,7 +194,13 @@ class LeafRenderer:
             layers = (int(front), int(back))
         if params.ripple.enabled:  # re-synthesises only when seed or β changed
             self.ripples.update([(params.ripple.seed, params.ripple.beta)])
-        if defer_veins and self.veins and params.venation.enabled and self._vein_layer >= 0:
+        lobe_layer = int(self.leaf_lobes.update([params])[0])   # rebuilt when the lobes changed
+        self.lobed = lobe_layer >= 0
+        if self.lobed:                             # a swept surface has no veins
+            vein_layer = int(self.leaf_veins.update([params], enabled=False)[0])
+            self.vein_tubes.update(None)
+            self.veins_pending = None
+        elif defer_veins and self.veins and params.venation.enabled and self._vein_layer >= 0:
             vein_layer = self._vein_layer          # the veins held, until refresh_veins
             self.veins_pending = params
         else:
@@ -190,7 +208,8 @@ class LeafRenderer:
             self.vein_tubes.update(params if self.veins else None)                      # rebuilt when the leaf changed
             self.veins_pending = None
         self._vein_layer = vein_layer
-        pack_leaf(params, self._leaf, layers=layers, vein_layer=vein_layer)
+        pack_leaf(params, self._leaf, layers=layers, vein_layer=vein_layer, lobe_layer=lobe_layer)
+        self._draw_defines = lobe_defines(self._leaf)
         self.leaf_ubo.write(self._leaf.tobytes())
         self.uploads += LEAF_BLOCK.nbytes
         self.prepare.run(self.leaf_ubo, 1)
@@ -216,6 +235,7 @@ class LeafRenderer:
         self.frame.bind()
         self._bind_tables()
         self.leaf_veins.use()
+        self.leaf_lobes.use()
 
     def _bind_tables(self) -> None:
         self.jitter.use()
@@ -235,13 +255,19 @@ class LeafRenderer:
     def draw(self, grid: tuple[int, int] = DEFAULT_GRID, *, wireframe: bool = False) -> None:
         """Draw the leaf last given to :meth:`set_leaf` with the camera last given to
         :meth:`set_camera` into the currently bound framebuffer (interactive use: the viewer
-        uploads only what an edit changed, then calls this every frame)."""
+        uploads only what an edit changed, then calls this every frame). A lobed leaf is drawn on
+        :func:`~leafview.gpu.lobe_tables.lobed_grid` of ``grid``."""
+        if self.lobed:
+            grid = lobed_grid(grid)
         self.frame.fit_viewport()   # the veins' level of detail: this draw's image height
         self._bind()
         self.ctx.enable(moderngl.DEPTH_TEST)
         self.ctx.wireframe = wireframe
         try:
-            self.grid(*grid).render(moderngl.TRIANGLES)
+            # the full program, less the sweep branch for an unlobed leaf (llvmpipe runs untaken
+            # branches too: it would cost every vertex of the viewer's leaf)
+            program = self.leaf_program(self._draw_defines)
+            self.resources.grid(*grid).vao(program).render(moderngl.TRIANGLES)
             if not wireframe:
                 self.vein_tubes.draw(self.frame)   # veins as geometry where they are wide enough on screen
         finally:
@@ -299,10 +325,18 @@ class LeafRenderer:
             check_memory(len(leaves) * w * h * (16 if linear else 4), "leaves",
                          f"{len(leaves):,} images of {w}×{h}")
         check_textures(leaves)
-        images: list[NDArray[Any]] = []
-        for start in range(0, len(leaves), chunk):
-            images += self._render_chunk(leaves[start:start + chunk], w, h, view, bg, (nu, nv), samples,
-                                         linear, cols, camera, flat)
+        images: list[NDArray[Any]] = [np.zeros(0)] * len(leaves)
+        # lobed leaves are drawn on their own grid: each kind in chunks of its own, images in order
+        for lobed in (False, True):
+            picks = [i for i, p in enumerate(leaves) if is_lobed(p) == lobed]
+            kind_grid = lobed_grid((nu, nv)) if lobed else (nu, nv)
+            kind_chunk = max(1, min(chunk, MAX_RESOURCE_BYTES // (kind_grid[0] * kind_grid[1] * DRAW_VERTEX_BYTES)))
+            for start in range(0, len(picks), kind_chunk):
+                part = picks[start:start + kind_chunk]
+                drawn = self._render_chunk([leaves[i] for i in part], w, h, view, bg, kind_grid, samples,
+                                           linear, cols, camera, flat)
+                for i, img in zip(part, drawn):
+                    images[i] = img
         return images
 
     def _render_chunk(self, leaves: Sequence[LeafParams], w: int, h: int, view: str,
@@ -315,8 +349,9 @@ class LeafRenderer:
         program (the same ``leaf.frag``), one indirect draw a leaf; one readback."""
         n = len(leaves)
         files = self.textures.update(leaves)
-        vein_layers = self.batch_veins.update(leaves, enabled=self.veins)
-        records, tables = pack_leaves(leaves, textures=files, vein_layers=vein_layers)
+        lobe_layers = self.batch_lobes.update(leaves)
+        vein_layers = self.batch_veins.update(leaves, enabled=self.veins and not (lobe_layers >= 0).any())
+        records, tables = pack_leaves(leaves, textures=files, vein_layers=vein_layers, lobe_layers=lobe_layers)
         self.jitter.upload(tables)
         keys = ripple_keys(leaves)
         if keys:
@@ -326,12 +361,14 @@ class LeafRenderer:
             self.prepare.run(leaf_rows, 1, offset=i * leaf_stride)
         # the shader permutation without the features no leaf of this chunk uses
         veins = vein_defines(records)
-        program = self.resources.leaf_program({**feature_defines(records), **veins}, varyings=DRAW_VARYINGS)
+        program = self.resources.leaf_program({**feature_defines(records), **veins, **lobe_defines(records)},
+                                              varyings=DRAW_VARYINGS)
         geometry = self.resources.grid(*grid)
         nverts = geometry.vertices
         points = geometry.points(program)
         self._bind_tables()
         self.batch_veins.use()
+        self.batch_lobes.use()
         self.frame.bind()   # the capture computes gl_Position too (discarded)
         with self.resources.capture.recording(n * nverts, DRAW_VERTEX_BYTES) as rec:
             # 1. the only vertex-shader pass over the leaves: capture, frame each camera on it
@@ -401,7 +438,8 @@ class LeafRenderer:
                 defines: Mapping[str, object] | None = None) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
         """Positions and normals (leaf space) computed by the rendering vertex shader at (u, v),
         read back through transform feedback: two (N, 3) float32 arrays. ``defines`` selects a
-        shader permutation (default: the full program)."""
+        shader permutation (default: the full program). A lobed leaf is evaluated on its swept
+        surface (u along the tie, v along the tour: :func:`leafview.deform.sweep.sweep_eval`)."""
         uu, vv = uv_arrays(u, v)   # finite, |u| <= 1, 0 <= v <= 1 (ValueError), as the numpy reference
         uv = np.stack([uu, vv], axis=-1).astype(np.float32)
         n = uv.shape[0]

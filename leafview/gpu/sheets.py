@@ -19,6 +19,7 @@ from leafview.gpu import default_renderer
 from leafview.gpu.context import check_error
 from leafview.gpu.instanced import InstancedLeaves
 from leafview.gpu.layout import pack_leaves, ripple_keys
+from leafview.gpu.lobe_tables import LobeTables, lobed_grid
 from leafview.gpu.renderer import LeafRenderer
 from leafview.gpu.targets import unpremultiply
 from leafview.gpu.textures import LeafTextures
@@ -35,7 +36,8 @@ def render_leaves(leaves: Sequence[LeafParams], size: tuple[int, int] = (256, 25
     """Draw ``leaves`` (world placement from each one's transform) into one (h, w, 4) uint8 sRGB
     image with a transparent background, framed like :meth:`LeafRenderer.render` (top view: no
     multisampling; other views 4×), or by ``camera`` (:func:`leafview.scene.camera.frame_view`) when
-    given. ``flat``: unlit colours (tests); ``veins``: leaves whose venation is enabled show their
+    given; lobed leaves (``LeafParams.lobes``) from their sweep tables, all on the lobed grid of
+    ``grid`` (:func:`~leafview.gpu.lobe_tables.lobed_grid`). ``flat``: unlit colours (tests); ``veins``: leaves whose venation is enabled show their
     veins (``--veins``). Draws with ``renderer``'s shared resources (default: the shared headless
     renderer's)."""
     resources = (renderer or default_renderer()).resources
@@ -46,12 +48,18 @@ def render_leaves(leaves: Sequence[LeafParams], size: tuple[int, int] = (256, 25
     samples = min(samples, ctx.max_samples)
     textures = LeafTextures(ctx)
     vein_draw = VeinDraw(ctx, resources.programs)
+    lobes = LobeTables(ctx)
     try:
         keys = textures.update(leaves)        # a missing or unreadable image: refused before anything is drawn
-        vein_layers = vein_draw.update(leaves, enabled=veins)
-        records, tables = pack_leaves(leaves, textures=keys, vein_layers=vein_layers)
+        lobe_layers = lobes.update(leaves)
+        unlobed = [p for p, layer in zip(leaves, lobe_layers.tolist()) if layer < 0]
+        vein_layers = np.full(len(leaves), -1, np.int32)
+        vein_layers[lobe_layers < 0] = vein_draw.update(unlobed, enabled=veins)   # swept leaves have no veins
+        if lobes.active:     # one grid for all: the lobed leaves' rows on their ties
+            grid = lobed_grid(grid)
+        records, tables = pack_leaves(leaves, textures=keys, vein_layers=vein_layers, lobe_layers=lobe_layers)
         with InstancedLeaves(ctx, records, grid, jitter_tables=tables, ripple_signals=ripple_keys(leaves),
-                             resources=resources, textures=textures, veins=vein_draw) as inst:
+                             resources=resources, textures=textures, veins=vein_draw, lobes=lobes) as inst:
             pos, _ = inst.capture()
             if camera is None:
                 camera = frame_view(view, pos.reshape(-1, 3).astype(np.float64), (w, h))
@@ -66,6 +74,7 @@ def render_leaves(leaves: Sequence[LeafParams], size: tuple[int, int] = (256, 25
     finally:
         textures.release()
         vein_draw.release()
+        lobes.release()
     return unpremultiply(img) if samples else img
 
 
