@@ -57,7 +57,7 @@ def test_lobed_leaf_renders(gl, tmp_path, capsys):
     assert main(["shapes", "--lobed", "maple", "-o", str(out), "--size", "64"]) == 0
     img, _ = read_image(out)
     assert img.shape == (64, 64, 4) and 0.2 < (img[..., 3] > 0).mean() < 0.8
-    assert "maple: 6 lobes" in capsys.readouterr().out
+    assert "maple: 4 lateral lobes, one margin" in capsys.readouterr().out
     assert main(["shapes", "--lobed", "oak"]) == 0             # without -o: describe it
     assert "pinnate, 8 lateral lobes" in capsys.readouterr().out
 

@@ -13,17 +13,15 @@ at the base (r_1 = Δs = 0) and add a terminal lobe along the vein; pinnate leav
 along the vein and end in a terminal lobe; bilobed leaves have one lobe per side and no terminal
 lobe.
 
-Joining (our choice, and why). Each lobe is a full leaf (its own Ω, shader-evaluated) whose base
-sits on the vein; adjacent lobes overlap, and where their margins cross lies the valley (sec. 5:
-"the intersections of adjacent margins form the valleys"). Where they do not cross, a ``web``
-blade (a catalogue shape along the vein, its half-width scaled) fills between the lobes, and its
-margin draws the valley (the paper's "default valley points"). All parts are coplanar, so to
-avoid z-fighting in the overlaps each part is lifted by a tiny, strictly ordered offset along the
-leaf normal (``Z_STEP`` leaf lengths, web lowest, terminal lobe highest, outer lobes below inner
-ones): the depth test then resolves every overlap the same way in every view, and the step
-(0.02 % of the leaf) is far below a pixel. No cracks: the parts overlap instead of meeting edge to
-edge, so the union is watertight (tests compare the rendered mask with the union of the lobe
-outlines and check which part wins each overlap).
+Joining. The parts are the *construction* of a lobed leaf, not what is drawn. Adjacent lobes
+overlap, and where their margins cross lies the valley (sec. 5: "the intersections of adjacent
+margins form the valleys"); where they do not cross, a ``web`` blade (a catalogue shape along the
+vein, its half-width scaled) fills between the lobes and its margin draws the valley (the paper's
+"default valley points"). :mod:`leafview.botany.lobe_outline` joins the parts' margins into ONE
+closed margin with valley B-splines, and that margin is what a lobed leaf carries
+(``LeafParams.lobes``) and what the shader sweeps (Mündermann et al. 2003). :func:`lobe_leaves`
+still places every part as a leaf of its own, lifted by a tiny ordered offset (``Z_STEP``) so
+that the parts can be inspected together.
 """
 
 from __future__ import annotations
@@ -130,7 +128,7 @@ class LobedLeaf:
         lat = [p for p in parts if p.role == "lateral"]
         return (f"{self.name or '(unnamed)'}: {self.kind}, {len(lat)} lateral lobes ({self.shape})"
                 f"{', terminal ' + self.terminal if self.terminal else ''}"
-                f"{', web ' + self.web if self.web else ''}; {len(parts)} shader leaves")
+                f"{', web ' + self.web if self.web else ''}; {len(parts)} parts joined into one margin")
 
 
 def _linear(i: int, n: int, a: float, b: float) -> float:

@@ -142,7 +142,8 @@ def _render_lobed(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     img = render_lobed(lobed, (args.size, args.size), args.view)
     write_image(out, img, description=f"leafview multilobed leaf: {lobed.name}")
-    print(f"wrote {out} ({args.size}×{args.size}, {args.view} view, {lobed.name}: {len(lobed.lobes())} lobes) "
+    lateral = sum(p.role == "lateral" for p in lobed.lobes())
+    print(f"wrote {out} ({args.size}×{args.size}, {args.view} view, {lobed.name}: {lateral} lateral lobes, one margin) "
           f"in {time.perf_counter() - t0:.1f} s")
     return EXIT_OK
 

@@ -1,7 +1,7 @@
-"""Drawing a multilobed leaf: every part (lobe, terminal lobe, web) is a shader-evaluated leaf in
-its own frame (:func:`leafview.botany.lobes.lobe_leaves`), all drawn together with one instanced
-draw (:class:`leafview.gpu.instanced.InstancedLeaves`) into one image; the depth test and the
-parts' ordered z levels decide each overlap (see :mod:`leafview.botany.lobes`)."""
+"""Drawing several leaves into one image with one instanced draw
+(:class:`leafview.gpu.instanced.InstancedLeaves`), and a multilobed compound leaf (Garg & Leow
+2011, sec. 5) as the one lobed leaf its parts join into (:mod:`leafview.botany.lobe_outline`:
+one closed margin, swept by the shader)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
-from leafview.botany.lobes import LobedLeaf, lobe_leaves
+from leafview.botany.lobe_outline import lobed_outline_params
+from leafview.botany.lobes import LobedLeaf
 from leafview.core.defaults import DETAIL_GRID
 from leafview.core.params import LeafParams
 from leafview.gpu import default_renderer
@@ -80,5 +81,6 @@ def render_leaves(leaves: Sequence[LeafParams], size: tuple[int, int] = (256, 25
 
 def render_lobed(lobed: LobedLeaf, size: tuple[int, int] = (256, 256), view: str = "top", **kwargs: Any
                  ) -> NDArray[np.uint8]:
-    """Render a multilobed leaf (all its parts in one draw); see :func:`render_leaves`."""
-    return render_leaves(lobe_leaves(lobed), size, view, **kwargs)
+    """Render a multilobed compound leaf as one lobed leaf (its parts joined into one margin,
+    :func:`~leafview.botany.lobe_outline.lobed_outline_params`); see :func:`render_leaves`."""
+    return render_leaves([lobed_outline_params(lobed)], size, view, **kwargs)
