@@ -25,6 +25,7 @@
 in vec3 v_world;
 in vec3 v_normal;
 in vec2 v_uv;
+in vec2 v_rib;   // distance from the midrib (or a lobed leaf's skeleton) in half-widths, fade (leaf.vert)
 flat in vec4 v_front;
 flat in vec3 v_back;
 flat in ivec2 v_layers;
@@ -84,8 +85,8 @@ bool leaf_albedo(out vec3 albedo, out bool textured, bool veined) {
 #endif
     albedo = front ? v_front.rgb : v_back;
     if (veined) return true;
-    // midrib: a narrow lighter band along u = 0, fading toward the apex
-    float rib = (1.0 - smoothstep(0.012, 0.035, abs(v_uv.x))) * (1.0 - 0.6 * v_uv.y);
+    // midrib (a lobed leaf: its skeleton): a narrow lighter band, fading toward the apex
+    float rib = (1.0 - smoothstep(0.012, 0.035, v_rib.x)) * (1.0 - 0.6 * v_rib.y);
     albedo = mix(albedo, albedo * 1.35 + vec3(0.05), 0.6 * rib);
     return true;
 }

@@ -12,7 +12,8 @@
 // storage-buffer reads as per-vertex gathers; an instanced attribute costs a fraction of that and
 // a texel fetch about half (docs/benchmarks.md).
 // A lobed leaf (leafview.core.lobes) takes the swept surface of leaf_eval.glsl's lobe_eval instead
-// of L_Ω, its v_uv the flat position (x, y in leaf lengths) and no veins.
+// of L_Ω, its v_uv the flat position (x, y in leaf lengths), a vein band along its skeleton and no
+// vein field.
 // The same program is used with transform feedback (v_object, v_object_normal) by
 // leafview.gpu.evaluate, so what is tested is what is drawn.
 #include "generated/leaf_block.glsl"
@@ -41,12 +42,14 @@ LeafVertex leaf_vertex;   // this vertex's leaf, made of the attributes first th
 layout(binding = JITTER_UNIT) uniform sampler2D jitter_table;
 
 in vec2 in_uv;
+const float LOBE_RIB_HALFWIDTH = 0.3;   // leaf lengths: a lobed leaf's vein band is as wide as on such a blade
 
 out vec3 v_object;          // leaf-space position (captured for tests and export)
 out vec3 v_object_normal;   // leaf-space upper-side normal
 out vec3 v_world;
 out vec3 v_normal;
 out vec2 v_uv;
+out vec2 v_rib;             // the lighter vein band of leaf.frag: (distance from it in half-widths, fade)
 flat out vec4 v_front;      // rgb, translucency
 flat out vec3 v_back;
 flat out ivec2 v_layers;    // front, back image texture layer, -1 untextured (leaf.frag)
@@ -84,6 +87,9 @@ void main() {
         L = le.L;
         n = le.N;
         uv = le.flat_xy;
+        // the skeleton is the lobed leaf's primary veins (Mündermann et al. 2003, sec. 3.2): the band
+        // follows it, its width as on a leaf of half-width LOBE_RIB_HALFWIDTH
+        v_rib = vec2(le.rib / LOBE_RIB_HALFWIDTH, 0.0);
     } else
 #else
     const int lobe_layer = -1;
@@ -96,6 +102,7 @@ void main() {
         LeafEval e = leaf_eval(jitter_table, uv);
         L = e.L;
         n = leaf_normal(e, uv.y);
+        v_rib = vec2(abs(uv.x), uv.y);   // the midrib, fading toward the apex
     }
     v_object = L;
     v_object_normal = n;

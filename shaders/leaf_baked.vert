@@ -23,6 +23,10 @@ in vec2 in_veins;      // vein layer + 1 (0: no veins; an unbound attribute read
 out vec3 v_world;
 out vec3 v_normal;
 out vec2 v_uv;
+#ifdef LEAF_BAKED_RIB
+in vec2 in_rib;   // the vein band's coordinates as leaf.vert computed them (thumbnails)
+#endif
+out vec2 v_rib;   // leaf.frag's vein band: in_rib, else (|u|, v) of the grid the leaf was baked on
 flat out vec4 v_front;
 flat out vec3 v_back;
 flat out ivec2 v_layers;
@@ -35,6 +39,11 @@ void main() {
     v_world = in_position;
     v_normal = in_normal;
     v_uv = in_uv;
+#ifdef LEAF_BAKED_RIB
+    v_rib = in_rib;
+#else
+    v_rib = vec2(abs(in_uv.x), in_uv.y);
+#endif
     v_front = in_front;
     v_back = in_back.rgb;
 #ifdef LEAF_NO_TEXTURE

@@ -367,6 +367,7 @@ struct LobeEval {
     vec3 Lv;    // dL/dv
     vec3 N;     // upper-side unit normal
     vec2 flat_xy;  // position on the flat leaf (leaf lengths): the shading coordinates
+    float rib;     // distance from the skeleton along the tie, t l (leaf lengths): the lighter vein band
 };
 
 // the periodic Catmull-Rom of texel row `row` at x = j + f (value q, d/dx dq); past either end of the
@@ -436,6 +437,7 @@ LobeEval lobe_eval(int layer, vec2 uv) {
     vec3 upn = up.xyz / max(length(up.xyz), 1e-30);
     r.N = size > 1e-6 * scale ? nrm / size : upn;
     r.flat_xy = fl.xy + t * (fl.zw - fl.xy);
+    r.rib = t * ln;
     return r;
 }
 #endif

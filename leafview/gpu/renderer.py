@@ -80,12 +80,26 @@ BATCH = 64            # leaves per atlas in render_many
 _MAX_ATLAS = 4096     # atlas side limit in pixels (well inside GL_MAX_RENDERBUFFER_SIZE)
 
 # what a thumbnail captures of each vertex and then draws from: world position, world normal
-# (as leaf.vert computes them) and the drawn (u, v) that leaf.frag's midrib, textures and veins read
-DRAW_VARYINGS = (*WORLD_VARYINGS, "v_uv")
-DRAW_VERTEX_FORMAT = "3f 3f 2f"
-DRAW_VERTEX_BYTES = 32
+# (as leaf.vert computes them), the drawn (u, v) that leaf.frag's textures and veins read and the
+# vein band's coordinates (v_rib: the midrib, or a lobed leaf's skeleton)
+DRAW_VARYINGS = (*WORLD_VARYINGS, "v_uv", "v_rib")
+DRAW_VERTEX_FORMAT = "3f 3f 2f 2f"
+DRAW_VERTEX_BYTES = 40
 _COMMAND = np.dtype([("count", "<u4"), ("instances", "<u4"), ("first_index", "<u4"), ("base_vertex", "<i4"),
                      ("base_instance", "<u4")])   # DrawElementsIndirectCommand
+
+
+def _present(program: moderngl.Program, fmt: str, names: Sequence[str]) -> tuple[str, ...]:
+    """``fmt`` and ``names`` with the attributes ``program`` does not use (the compiler drops an
+    input whose output no stage reads) turned into padding."""
+    parts, kept = [], []
+    for code, name in zip(fmt.split(), names):
+        if name in program:
+            parts.append(code)
+            kept.append(name)
+        else:
+            parts.append(f"{4 * int(code[:-1])}x")   # "3f" -> "12x"
+    return (" ".join(parts), *kept)
 
 
 class LeafRenderer:
@@ -397,11 +411,12 @@ class LeafRenderer:
             target.clear(bg)
             self.ctx.enable_only(moderngl.DEPTH_TEST)
             baked = self.resources.programs.program("leaf_baked.vert", "leaf.frag",
-                                                    defines={**texture_defines(records), **veins})
+                                                    defines={**texture_defines(records), **veins, "LEAF_BAKED_RIB": 1})
             fmt, names = _colour_format(baked)
             vao = self.ctx.vertex_array(
                 baked,
-                [(rec.buffer, DRAW_VERTEX_FORMAT, "in_position", "in_normal", "in_uv"), (colours, fmt, *names)],
+                [(rec.buffer, *_present(baked, DRAW_VERTEX_FORMAT, ("in_position", "in_normal", "in_uv", "in_rib"))),
+                 (colours, fmt, *names)],
                 index_buffer=geometry.ibo, index_element_size=4)
             try:
                 for i in range(n):
