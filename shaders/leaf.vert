@@ -12,8 +12,8 @@
 // storage-buffer reads as per-vertex gathers; an instanced attribute costs a fraction of that and
 // a texel fetch about half (docs/benchmarks.md).
 // A lobed leaf (leafview.core.lobes) takes the swept surface of leaf_eval.glsl's lobe_eval instead
-// of L_Ω, its v_uv the flat position (x, y in leaf lengths), a vein band along its skeleton and no
-// vein field.
+// of L_Ω, its v_uv the flat position in its texture window (u in [-1, 1], v in [0, 1]), a vein band
+// along its skeleton and no vein field.
 // The same program is used with transform feedback (v_object, v_object_normal) by
 // leafview.gpu.evaluate, so what is tested is what is drawn.
 #include "generated/leaf_block.glsl"
@@ -86,7 +86,7 @@ void main() {
         LobeEval le = lobe_eval(lobe_layer, uv);
         L = le.L;
         n = le.N;
-        uv = le.flat_xy;
+        uv = le.uv;   // the flat position in the texture window (leafview/deform/sweep.py, texture_uv)
         // the skeleton is the lobed leaf's primary veins (Mündermann et al. 2003, sec. 3.2): the band
         // follows it, its width as on a leaf of half-width LOBE_RIB_HALFWIDTH
         v_rib = vec2(le.rib / LOBE_RIB_HALFWIDTH, 0.0);

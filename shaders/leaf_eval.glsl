@@ -357,7 +357,8 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
 // The swept surface of a lobed leaf (Mündermann et al. 2003, secs 3.3-4): railroad ties between the
 // skeleton and the margin, one per texel column of layer `layer` of leaf_lobe_table, in tour order,
 // four texel rows (leafview/deform/sweep.py, table_texels; leafview/gpu/lobe_tables.py):
-// r0 (origin O, margin w), r1 (rim E, length l), r2 (up U, cup), r3 (flat foot k, flat end s).
+// r0 (origin O, margin w), r1 (rim E, length l), r2 (up U; w: tie 0 the cup, ties 1-4 the texture
+// window), r3 (flat foot k, flat end s).
 // numpy reference: leafview/deform/sweep.py, sweep_eval (a readback test compares the two).
 layout(binding = LOBE_UNIT) uniform sampler2DArray leaf_lobe_table;
 
@@ -366,7 +367,8 @@ struct LobeEval {
     vec3 Lu;    // dL/du
     vec3 Lv;    // dL/dv
     vec3 N;     // upper-side unit normal
-    vec2 flat_xy;  // position on the flat leaf (leaf lengths): the shading coordinates
+    vec2 flat_xy;  // position on the flat leaf (leaf lengths)
+    vec2 uv;       // texture coordinates: flat_xy in the table's texture window (u in [-1, 1], v in [0, 1])
     float rib;     // distance from the skeleton along the tie, t l (leaf lengths): the lighter vein band
 };
 
@@ -437,6 +439,10 @@ LobeEval lobe_eval(int layer, vec2 uv) {
     vec3 upn = up.xyz / max(length(up.xyz), 1e-30);
     r.N = size > 1e-6 * scale ? nrm / size : upn;
     r.flat_xy = fl.xy + t * (fl.zw - fl.xy);
+    // the texture window (x_c, w, y_0, h) in the w of texel row 2, ties 1-4 (sweep.py, texture_uv)
+    vec4 win = vec4(texelFetch(leaf_lobe_table, ivec3(1, 2, layer), 0).w, texelFetch(leaf_lobe_table, ivec3(2, 2, layer), 0).w,
+                    texelFetch(leaf_lobe_table, ivec3(3, 2, layer), 0).w, texelFetch(leaf_lobe_table, ivec3(4, 2, layer), 0).w);
+    r.uv = vec2((r.flat_xy.x - win.x) / win.y, (r.flat_xy.y - win.z) / win.w);
     r.rib = t * ln;
     return r;
 }

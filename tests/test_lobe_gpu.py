@@ -15,7 +15,7 @@ from leafview.core.defaults import DEFAULT_GRID, DETAIL_GRID, LOBED_GRID
 from leafview.core.lobes import BranchTurtle, Lobes
 from leafview.core.params import LeafParams, Material, Ripple, Transform
 from leafview.deform.surface import evaluate, grid_uv
-from leafview.deform.sweep import SWEEP_ROWS, SweepTable, sweep_eval
+from leafview.deform.sweep import SWEEP_ROWS, SweepTable, catmull_rom_periodic, sweep_eval
 from leafview.gpu.instanced import InstancedLeaves
 from leafview.gpu.layout import (
     BRANCH_LOBE,
@@ -32,7 +32,7 @@ from leafview.gpu.layout import (
     without_derived,
 )
 from leafview.gpu.lobe_tables import LobeTables, lobe_keys, lobe_texels, lobed_grid
-from leafview.gpu.renderer import LeafRenderer
+from leafview.gpu.renderer import DRAW_VARYINGS, DRAW_VERTEX_BYTES, LeafRenderer
 from leafview.gpu.sheets import render_leaves
 from leafview.gpu.targets import OffscreenTarget
 from leafview.resources import builtin_presets
@@ -249,11 +249,16 @@ def test_lobe_slot_and_branch_code_round_trip():
     assert read_slot(pack_leaf(leaves[1], lobe_layer=2), "leaf_lobe_layer") == 2
 
 
-def test_lobe_texels_hold_the_cup():
+def test_lobe_texels_hold_the_cup_and_the_texture_window():
     table = turtle_table()
     tex = lobe_texels(table)
     assert tex.shape == (4, SWEEP_ROWS, 4) and tex.dtype == np.float32
-    assert (tex[2, :, 3] == np.float32(table.cup)).all()
+    assert tex[2, 0, 3] == np.float32(table.cup)
+    np.testing.assert_array_equal(tex[2, 1:5, 3], np.float32(table.window))
+    xc, hw, y0, h = table.window     # the window is the flat margin's bounding box
+    rim = table.flat[:, 2:]
+    assert np.isclose(rim[:, 0].min(), xc - hw) and np.isclose(rim[:, 0].max(), xc + hw)
+    assert np.isclose(rim[:, 1].min(), y0) and np.isclose(rim[:, 1].max(), y0 + h)
     np.testing.assert_array_equal(tex[0, :, 3], table.margin.astype(np.float32))
 
 
@@ -475,3 +480,33 @@ def test_sheets_draw_lobed_leaves(gl):
 def leafview_evaluate(params: LeafParams) -> np.ndarray:
     uv = grid_uv(33, 65).astype(np.float64)
     return np.asarray(evaluate(params, uv[:, 0], uv[:, 1]))
+
+
+@pytest.mark.gl
+def test_texture_uv_and_vein_band_read_back_equal_their_twins(renderer):
+    """leaf.vert's v_uv of a lobed leaf is its flat position in the table's texture window and
+    v_rib.x the distance from the skeleton along the tie over LOBE_RIB_HALFWIDTH (0.3), read back
+    through the thumbnail's transform feedback against deform.sweep."""
+    leaf = lobed_leaf("turtle")
+    table = hand_table(leaf.lobes)
+    uv = _uv_points()
+    renderer.set_leaf(leaf, textures=False)
+    renderer._bind()
+    program = renderer.resources.leaf_program({}, varyings=DRAW_VARYINGS)
+    vbo = renderer.ctx.buffer(uv.astype(np.float32).tobytes())
+    vao = renderer.ctx.vertex_array(program, [(vbo, "2f", "in_uv")])
+    try:
+        with renderer.resources.capture.recording(len(uv), DRAW_VERTEX_BYTES) as rec:
+            rec.add(vao, len(uv))
+            out = rec.records().reshape(len(uv), -1)
+    finally:
+        vao.release()
+        vbo.release()
+    ev = sweep_eval(table, uv)
+    np.testing.assert_allclose(out[:, 6:8], ev.uv, atol=2e-5)
+    t = 0.5 * (uv[:, 0] + 1.0)
+    ln, _ = catmull_rom_periodic(table.length, uv[:, 1] * table.rows)
+    np.testing.assert_allclose(out[:, 8], t * ln / 0.3, atol=2e-5)
+    np.testing.assert_array_equal(out[:, 9], 0.0)
+    inside = (np.abs(ev.uv[:, 0]) <= 1 + 1e-6) & (ev.uv[:, 1] >= -1e-6) & (ev.uv[:, 1] <= 1 + 1e-6)
+    assert inside.all()          # the window holds the whole blade

@@ -43,7 +43,14 @@ from leafview.export.images import contact_sheet, write_image
 from leafview.fit.photo import ImageFit, fit_image, polygon_mask, top_view_iou
 from leafview.fit.photo_batch import default_jobs, fit_photos
 from leafview.fit.photo_texture import texture_uint8
-from leafview.fit.synthetic_photos import BACKGROUNDS, KINDS, SyntheticPhoto, synthetic_photo, write_photo
+from leafview.fit.synthetic_photos import (
+    BACKGROUNDS,
+    KINDS,
+    LOBED_PRESETS,
+    SyntheticPhoto,
+    synthetic_photo,
+    write_photo,
+)
 from leafview.gpu.morph import shared_camera
 from leafview.gpu.renderer import LeafRenderer
 
@@ -51,6 +58,7 @@ __all__ = ["run", "format_table", "fit_cells", "photo_cell", "write_figure", "GO
 
 GOALS = {"iou_median": 0.97, "iou_worst": 0.93, "landmark_pct": 2.0, "photos_per_s": 5.0}
 PHOTOS, QUICK_PHOTOS = 24, 2
+LOBED_PHOTOS, LOBED_SEED = 12, 3500   # the lobed set (maple, oak, bilobed in turn; synthetic_photo kind="lobed")
 SIZE = (1000, 1000)
 SEED = 1500
 FIGURE_PHOTOS, FIGURE_CELL, FIGURE_SEED = 8, 192, 2500
@@ -181,6 +189,42 @@ def _measure(sp: SyntheticPhoto, path: Path) -> dict[str, Any]:
             "seconds": seconds, "cpu_s": cpu, "stage_seconds": fit.report["stage_seconds"]}
 
 
+def _lobed_rows(count: int) -> list[dict[str, Any]]:
+    """The lobed set: per photo the top view's IoU with the true outline, base and apex errors (% of
+    the length), whether it was fitted as lobed, and the seconds."""
+    rows = []
+    for i in range(count):
+        preset = LOBED_PRESETS[i % len(LOBED_PRESETS)]
+        sp = synthetic_photo(LOBED_SEED + i, size=SIZE, lobed_preset=preset)
+        t0 = time.perf_counter()
+        try:
+            fit = fit_image(sp.image, dpi=sp.dpi)
+        except LeafviewError as exc:
+            rows.append({"seed": LOBED_SEED + i, "preset": preset, "error": str(exc)})
+            continue
+        seconds = time.perf_counter() - t0
+        rows.append({"seed": LOBED_SEED + i, "preset": preset, "lobed": bool(fit.report["lobed"]),
+                     "iou": top_view_iou(fit.margin_pixels(), polygon_mask(sp.outline, sp.blade.shape)),
+                     "base_pct": 100.0 * float(np.hypot(*(fit.outline.base - sp.base))) / sp.length_px,
+                     "apex_pct": 100.0 * float(np.hypot(*(fit.outline.apex - sp.apex))) / sp.length_px,
+                     "controls": fit.report.get("controls"), "seconds": seconds})
+    return rows
+
+
+def _lobed_summary(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    ok = [r for r in rows if "error" not in r]
+    ious = [r.get("iou", 0.0) for r in rows] or [float("nan")]
+    base = [r["base_pct"] for r in ok] or [float("nan")]
+    apex = [r["apex_pct"] for r in ok] or [float("nan")]
+    return {"lobed_photos": len(rows), "lobed_failed": len(rows) - len(ok),
+            "lobed_detected": sum(1 for r in ok if r["lobed"]),
+            "lobed_iou_median": statistics.median(ious), "lobed_iou_worst": min(ious),
+            "lobed_base_pct_median": statistics.median(base), "lobed_base_pct_worst": max(base),
+            "lobed_apex_pct_median": statistics.median(apex), "lobed_apex_pct_worst": max(apex),
+            "lobed_seconds_median": statistics.median([r["seconds"] for r in ok]) if ok else float("nan"),
+            "lobed_rows": rows}
+
+
 def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, Any]:
     """Measure (see the module docstring); ``quick``: 2 photos."""
     count = QUICK_PHOTOS if quick else PHOTOS
@@ -189,7 +233,7 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
     log_gl_renderer("fit", info["gl_renderer"])
     rows: list[dict[str, Any]] = []
     jobs = default_jobs()
-    with Progress(count + 1) as progress, tempfile.TemporaryDirectory(prefix="leafview-bench-fit-") as tmp:
+    with Progress(count + 2) as progress, tempfile.TemporaryDirectory(prefix="leafview-bench-fit-") as tmp:
         paths: list[Path] = []
         for i in range(count):
             progress.step(f"photo {i + 1} of {count}")
@@ -206,6 +250,8 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
         t1 = time.perf_counter()
         pooled += list(results)
         pooled_s, first_s = time.perf_counter() - t1, t1 - t0
+        progress.step("the lobed photos")
+        lobed = _lobed_summary(_lobed_rows(QUICK_PHOTOS if quick else LOBED_PHOTOS))
     ok = [r for r in rows if "error" not in r]
     ious = [r["iou"] if "error" not in r else 0.0 for r in rows]
     base = [r["base_pct"] for r in ok] or [float("nan")]
@@ -221,7 +267,7 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
             "pool_first_s": first_s, "photos_per_s_pooled_overall": count / (first_s + pooled_s),
             "pooled_failed": sum(1 for f in pooled if isinstance(f, str)),
             "cpu_ms": 1e3 * sum(r["cpu_s"] for r in rows) / count, "stage_ms": {k: 1e3 * v for k, v in stages.items()},
-            "asymmetric_fits": sum(1 for r in ok if r["asymmetric"]), "rows": rows}
+            "asymmetric_fits": sum(1 for r in ok if r["asymmetric"]), "rows": rows, **lobed}
 
 
 def format_table(res: dict[str, Any]) -> str:
@@ -247,7 +293,12 @@ def format_table(res: dict[str, Any]) -> str:
              f"first after {res['pool_first_s']:.2f} s (the pool's start), {res['photos_per_s_pooled_overall']:.2f} /s "
              "with it",
              "  wall time per stage, median        " + ", ".join(f"{k} {v:.0f} ms" for k, v in res["stage_ms"].items()),
-             f"  failed photos {res['failed']}, fitted as two halves {res['asymmetric_fits']}"]
+             f"  failed photos {res['failed']}, fitted as two halves {res['asymmetric_fits']}",
+             f"  lobed photos ({res['lobed_photos']}: maple, oak, bilobed): fitted as lobed {res['lobed_detected']}, "
+             f"IoU median {res['lobed_iou_median']:.4f} / worst {res['lobed_iou_worst']:.4f}, base median / worst "
+             f"{res['lobed_base_pct_median']:.2f} / {res['lobed_base_pct_worst']:.2f} %, apex "
+             f"{res['lobed_apex_pct_median']:.2f} / {res['lobed_apex_pct_worst']:.2f} %, "
+             f"{1e3 * res['lobed_seconds_median']:.0f} ms a photo"]
     for r in res["rows"]:
         what = (f"error: {r['error'][:80]}" if "error" in r else
                 f"IoU {r['iou']:.4f}  base {r['base_pct']:5.2f} %  apex {r['apex_pct']:5.2f} %  rows {r['rows']}"

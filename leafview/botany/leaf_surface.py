@@ -9,8 +9,8 @@ culling and export use where they need the drawn surface in numpy.
 
 A lobed leaf is drawn on :func:`leafview.deform.sweep.lobed_grid` of the grid asked for (u along
 each tie, v along the tour of ties), and its :func:`tessellate` mesh is that grid with the
-coincident vertices of paired ties welded: one sheet, one boundary loop, (u, v) the flat leaf's
-position (Mündermann et al. 2003, eq. 1).
+coincident vertices of paired ties welded: one sheet, one boundary loop, (u, v) the texture coordinates: the flat
+leaf's position in its texture window (Mündermann et al. 2003, eq. 1; deform.sweep.texture_uv).
 """
 
 from __future__ import annotations
@@ -87,4 +87,4 @@ def tessellate(params: LeafParams, nu: int = DEFAULT_GRID[0], nv: int = DEFAULT_
     # the welded vertices keep their first grid sample's normal and flat position
     key = {tuple(p): i for i, p in reversed(list(enumerate(e.L.tolist())))}
     first = np.array([key[tuple(p)] for p in verts.tolist()], dtype=np.int64)
-    return Mesh(verts, e.normal[first], e.flat[first], faces.astype(np.uint32))
+    return Mesh(verts, e.normal[first], e.uv[first], faces.astype(np.uint32))

@@ -51,6 +51,7 @@ from leafview.errors import GLUnavailable, UsageError, one_line
 from leafview.export.images import contact_sheet, write_image
 from leafview.fit.photo import DPI_RANGE, ImageFit, fit_image
 from leafview.fit.photo_batch import MAX_JOBS, default_jobs, fit_photos
+from leafview.fit.photo_lobed import LOBED_MODES
 from leafview.fit.photo_texture import MAX_TEXTURE_SIZE, MIN_TEXTURE_SIZE, texture_uint8
 from leafview.gpu import default_renderer
 from leafview.gpu.renderer import LeafRenderer
@@ -63,7 +64,7 @@ _CELL = 224                 # a contact sheet tile's side for up to _FULL_CELLS 
 _FULL_CELLS = 60
 _CLOUD_OPTIONS = (("scanlines", "--scanlines"), ("iterations", "--iterations"), ("keep_unexplained", "--keep-unexplained"))
 _PHOTO_OPTIONS = (("base", "--base"), ("apex", "--apex"), ("dpi", "--dpi"), ("texture_size", "--texture-size"),
-                  ("jobs", "--jobs"))
+                  ("jobs", "--jobs"), ("lobed", "--lobed"))
 
 
 # -- options -------------------------------------------------------------------------------------------
@@ -107,6 +108,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="photos: dots per inch, replacing the file's resolution (the leaf's scale becomes metres)")
     p.add_argument("--texture-size", type=_texture_size, default=None, metavar="N",
                    help="photos: side of the square front texture in texels (default 512)")
+    p.add_argument("--lobed", choices=LOBED_MODES, default=None,
+                   help="photos: fit a lobed leaf (its closed margin): auto (when the outline looks lobed; "
+                        "the default), on, or off (always the unilobed model)")
     p.add_argument("--jobs", type=_jobs, default=None, metavar="N",
                    help=f"a folder of photos: worker processes (default: one per core, at most {MAX_JOBS})")
 
@@ -170,7 +174,7 @@ def _warn(source: str | Path, fit: ImageFit, leaf_set: bool, out: Path) -> None:
 
 
 def _options(args: argparse.Namespace) -> dict[str, Any]:
-    return {"dpi": args.dpi, "texture_size": args.texture_size or 512}
+    return {"dpi": args.dpi, "texture_size": args.texture_size or 512, "lobed": args.lobed or "auto"}
 
 
 # -- one photo -------------------------------------------------------------------------------------------
@@ -193,8 +197,10 @@ def run(args: argparse.Namespace) -> int:
     texture, _ = write_fit(fit, out, leaf_set=leaf_set)
     r = fit.report
     scale = f"{r['scale']:.4g} m ({r['dpi']:g} dpi)" if r["dpi"] else "1 (no resolution)"
+    model = (f"a lobed margin of {r['controls']} control points" if r["lobed"] else
+             f"{'/'.join(str(n) for n in r['rows'])} silhouette rows")
     report(args, f"wrote {out} and {texture.name}: IoU {r['iou']:.3f} with the traced leaf, Hausdorff "
-                 f"{r['hausdorff_pct']:.2f} % of the length, {'/'.join(str(n) for n in r['rows'])} silhouette rows"
+                 f"{r['hausdorff_pct']:.2f} % of the length, {model}"
                  f"{', two halves' if fit.asymmetric else ''}, petiole {r['petiole_length']:.3f}, scale {scale}, "
                  f"in {r['seconds']:.2f} s")
     return EXIT_OK
@@ -208,7 +214,7 @@ def _cell(count: int) -> int:
 def _entry(photo: Path, leaf: Path, texture: Path, fit: ImageFit) -> dict[str, Any]:
     r = fit.report
     keys = ("iou", "hausdorff_pct", "rows", "row_residuals", "asymmetric", "sides_differ", "petiole_length", "scale",
-            "dpi", "base_px", "apex_px", "length_px", "cut_sides", "warnings", "seconds")
+            "dpi", "base_px", "apex_px", "length_px", "cut_sides", "warnings", "seconds", "lobed")
     return {"photo": photo.name, "leaf": leaf.name, "texture": texture.name, **{k: r[k] for k in keys}}
 
 

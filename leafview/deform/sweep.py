@@ -50,7 +50,7 @@ from leafview.core.params import Ripple
 from leafview.deform.fbm import ripple_signal, sample_periodic
 
 __all__ = ["SWEEP_ROWS", "RIPPLE_TIE", "ROW_STEPS", "SweepTable", "SweepEval", "sweep_eval", "catmull_rom_periodic",
-           "table_texels", "lobed_grid"]
+           "table_texels", "lobed_grid", "texture_window", "texture_uv", "flat_of_uv"]
 
 RIPPLE_TIE = 0.05    # leaf lengths: ties shorter than this ripple less (ρ(ℓ) of _add_margin_ripple)
 SWEEP_ROWS = 256     # ties per table: a multiple of 4, so grids of N/2 and N/4 rows keep the pairing
@@ -92,11 +92,18 @@ class SweepTable:
     def rows(self) -> int:
         return len(self.origin)
 
+    @property
+    def window(self) -> tuple[float, float, float, float]:
+        """The texture window (x_c, w, y_0, h): the flat margin's bounding box (centre x, half
+        width, bottom, height), which :func:`texture_uv` maps onto u in [-1, 1], v in [0, 1]."""
+        return texture_window(self.flat[:, 2:])
+
 
 @dataclass(frozen=True)
 class SweepEval:
     """Positions ``L``, partials ``Lu``, ``Lv``, upper-side normals ``normal`` (n, 3), the flat
-    position ``flat`` (n, 2) and the margin coordinate ``w`` (n,) at the evaluated (u, v)."""
+    position ``flat`` (n, 2), the margin coordinate ``w`` (n,) and the texture coordinates ``uv``
+    (n, 2) at the evaluated (u, v)."""
 
     L: NDArray[np.float64]
     Lu: NDArray[np.float64]
@@ -104,16 +111,44 @@ class SweepEval:
     normal: NDArray[np.float64]
     flat: NDArray[np.float64]
     w: NDArray[np.float64]
+    uv: NDArray[np.float64]      # the texture coordinates: ``flat`` in the table's window (texture_uv)
+
+
+def texture_window(rim_flat: ArrayLike) -> tuple[float, float, float, float]:
+    """(x_c, w, y_0, h) of the bounding box of the flat margin points ``rim_flat`` (n, 2)."""
+    p = np.asarray(rim_flat, dtype=np.float64)
+    x0, y0 = p.min(axis=0)
+    x1, y1 = p.max(axis=0)
+    return float(0.5 * (x0 + x1)), float(max(0.5 * (x1 - x0), 1e-9)), float(y0), float(max(y1 - y0, 1e-9))
+
+
+def texture_uv(flat: ArrayLike, window: tuple[float, float, float, float]) -> NDArray[np.float64]:
+    """A lobed leaf's texture coordinates: its flat position (Mündermann et al. 2003, eq. 1) in
+    the ``window`` (x_c, w, y_0, h), u = (x - x_c) / w in [-1, 1] and v = (y - y_0) / h in [0, 1],
+    the (u, v) every leaf's image texture is addressed by (:func:`leafview.core.texture.texture_st`)."""
+    f = np.asarray(flat, dtype=np.float64)
+    xc, hw, y0, h = window
+    return np.stack([(f[..., 0] - xc) / hw, (f[..., 1] - y0) / h], axis=-1)
+
+
+def flat_of_uv(u: ArrayLike, v: ArrayLike, window: tuple[float, float, float, float]
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The inverse of :func:`texture_uv`: the flat position (x, y) of texture coordinates (u, v)."""
+    xc, hw, y0, h = window
+    return xc + np.asarray(u, np.float64) * hw, y0 + np.asarray(v, np.float64) * h
 
 
 def table_texels(table: SweepTable) -> NDArray[np.float32]:
     """The table as the (4, N, 4) float32 texels the shader reads (row r of the texture, tie j):
-    r0 (origin, w), r1 (rim, ℓ), r2 (up, 0), r3 (k, s)."""
+    r0 (origin, w), r1 (rim, ℓ), r2 (up, and in w: tie 0 the cup, ties 1-4 the texture window
+    x_c, w, y_0, h), r3 (k, s)."""
     n = table.rows
     out = np.zeros((4, n, 4), np.float32)
     out[0, :, :3], out[0, :, 3] = table.origin, table.margin
     out[1, :, :3], out[1, :, 3] = table.rim, table.length
     out[2, :, :3] = table.up
+    out[2, 0, 3] = table.cup
+    out[2, 1:5, 3] = table.window
     out[3] = table.flat
     return out
 
@@ -176,7 +211,8 @@ def sweep_eval(table: SweepTable, uv: ArrayLike, ripple: Ripple | None = None) -
     ok = size > 1e-6 * scale
     normal = np.where(ok[:, None], nrm / np.where(ok, size, 1.0)[:, None], upn)
     flat = fl[:, :2] + tt * (fl[:, 2:] - fl[:, :2])
-    return SweepEval(L, Lu, Lv, normal, flat, np.mod(w, 1.0))
+    xc, hw, y0, h = (float(np.float32(x)) for x in table.window)   # as the shader reads them (float32)
+    return SweepEval(L, Lu, Lv, normal, flat, np.mod(w, 1.0), texture_uv(flat, (xc, hw, y0, h)))
 
 
 def _add_margin_ripple(rip: Ripple, t: NDArray[np.float64], w: NDArray[np.float64], dw: NDArray[np.float64],

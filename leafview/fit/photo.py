@@ -49,14 +49,25 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from leafview.botany.asymmetric import LEFT_HALF, RIGHT_HALF, with_half
+from leafview.botany.lobe_sweep import sweep_table
 from leafview.botany.outline_fit import hausdorff, margin
 from leafview.botany.quick_fit import quick_fit_outlines
+from leafview.core.bspline import sample_closed
 from leafview.core.params import SCALE_RANGE, Bending, LeafParams, Transform
 from leafview.errors import ParamError
 from leafview.fit.blas import single_threaded
+from leafview.fit.photo_lobed import (
+    LOBED_MODES,
+    LobeMeasures,
+    fit_lobed_margin,
+    lobe_measures,
+    lobed_landmarks,
+    lobed_leaf,
+    looks_lobed,
+)
 from leafview.fit.photo_outline import LeafOutline, Photo, as_photo, leaf_outline
-from leafview.fit.photo_texture import leaf_texture
-from leafview.fit.photo_veins import detect_veins, with_veins
+from leafview.fit.photo_texture import leaf_texture, lobed_texture
+from leafview.fit.photo_veins import VeinEstimate, detect_veins, with_veins
 
 __all__ = ["ImageFit", "fit_image", "canonical_frame", "outline_sides", "margin_pixels", "polygon_mask",
            "top_view_iou", "PHOTO_FIT_TARGET", "HALVES_AREA_GAIN", "METRES_PER_INCH", "MIN_LENGTH_PX", "DPI_RANGE"]
@@ -185,7 +196,11 @@ def _margins(parts: tuple[LeafParams, ...], n: int) -> tuple[F64, F64]:
 
 
 def margin_pixels(parts: tuple[LeafParams, ...], pixel_from_leaf: ArrayLike, n: int = _MARGIN_SAMPLES) -> F64:
-    """The top view's boundary (right margin up, left margin down) as a polygon in photo pixels."""
+    """The top view's boundary (right margin up, left margin down; a lobed leaf's closed margin from
+    its base, clockwise) as a polygon in photo pixels."""
+    if parts[0].lobes.enabled:
+        ctrl = np.asarray(parts[0].lobes.outline, np.float64)
+        return _apply(np.asarray(pixel_from_leaf, np.float64), sample_closed(ctrl, max(2 * n - 2, 4 * len(ctrl))))
     right, left = _margins(parts, n)
     return _apply(np.asarray(pixel_from_leaf, np.float64), np.vstack([right, left[-2:0:-1]]))
 
@@ -286,7 +301,7 @@ def _choose(right: F64, left: F64, target: float) -> tuple[tuple[LeafParams, Lea
 @single_threaded      # many small matrix products: BLAS threads only hand off work on a busy machine
 def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, base: ArrayLike | None = None,
               apex: ArrayLike | None = None, dpi: float | None = None, name: str = "", texture_size: int = 512,
-              target: float = PHOTO_FIT_TARGET, halves: bool = True) -> ImageFit:
+              target: float = PHOTO_FIT_TARGET, halves: bool = True, lobed: str = "auto") -> ImageFit:
     """Fit the leaf model to the leaf in a photo or scan (see the module docstring).
 
     Parameters
@@ -306,6 +321,10 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
     halves
         Allow two one-sided halves where the sides differ. Off: always one symmetric leaf, and a
         warning when two halves would have followed the photo better.
+    lobed
+        ``auto``: a lobed leaf when the traced outline looks lobed
+        (:func:`leafview.fit.photo_lobed.looks_lobed`); ``on``: always a lobed leaf (its closed
+        margin, ``lobes.outline``); ``off``: always Ω (the unilobed fit).
 
     Returns
     -------
@@ -330,11 +349,17 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
     t0 = time.perf_counter()
     if not (isinstance(target, (int, float)) and math.isfinite(target) and target > 0.0):
         raise ParamError("target", f"must be a positive number, got {target!r}")
+    if lobed not in LOBED_MODES:
+        raise ParamError("lobed", f"must be one of {', '.join(LOBED_MODES)}, got {lobed!r}")
     photo = as_photo(image_or_path)
     source = photo.path or None
     dots = _check_dpi(dpi, photo)
     t1 = time.perf_counter()
     traced = leaf_outline(photo, base=base, apex=apex)
+    measures = lobe_measures(traced.outline)
+    is_lobed = lobed == "on" or (lobed == "auto" and looks_lobed(measures))
+    if is_lobed and base is None and apex is None:
+        traced = _lobed_landmarks(traced, measures)
     t2 = time.perf_counter()
     length_px = float(np.hypot(*(traced.apex - traced.base)))
     if not length_px >= MIN_LENGTH_PX:
@@ -344,6 +369,9 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
     warnings = list(traced.warnings)
     frame = canonical_frame(traced.base, traced.apex)
     outline = _apply(frame, traced.outline)
+    if is_lobed:
+        return _fit_lobed(photo, traced, frame, outline, measures, name, dots, warnings, target, texture_size,
+                          (t0, t1, t2))
     try:
         right, left = outline_sides(outline)
     except ParamError as exc:
@@ -412,6 +440,8 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
         "method": traced.method,
         "warnings": warnings,
         "veins": veins.report(),
+        "lobed": False,
+        "lobedness": measures.report(),
         "seconds": 0.0,
     }
     t5 = time.perf_counter()
@@ -419,4 +449,62 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
     report["stage_seconds"] = {"read": round(t1 - t0, 4), "outline": round(t2 - t1, 4), "fit": round(t3 - t2, 4),
                                "texture": round(t4 - t3, 4), "veins": round(t_veins - t4, 4),
                                "measures": round(t5 - t_veins, 4)}
+    return ImageFit(parts, texture, traced, frame, report, tuple(warnings), photo)
+
+
+# -- a lobed leaf ----------------------------------------------------------------------------------------
+def _lobed_landmarks(traced: LeafOutline, measures: LobeMeasures) -> LeafOutline:
+    """``traced`` with the base and apex of a lobed blade (:func:`lobed_landmarks`), the outline
+    starting at the point nearest the base."""
+    b, a = lobed_landmarks(traced.outline, traced.petiole, measures)
+    k = int(np.argmin(np.hypot(*(traced.outline - b).T)))
+    return replace(traced, base=np.asarray(b, np.float64), apex=np.asarray(a, np.float64),
+                   outline=np.roll(traced.outline, -k, axis=0))
+
+
+def _scale_and_petiole(traced: LeafOutline, length_px: float, dots: float | None,
+                       warnings: list[str]) -> tuple[float, float]:
+    petiole_px = float(np.sum(np.hypot(*np.diff(traced.petiole, axis=0).T))) if len(traced.petiole) > 1 else 0.0
+    petiole = petiole_px / length_px
+    if petiole > 10.0:
+        warnings.append(f"the petiole is {petiole:.1f} leaf lengths long; clamped to 10")
+        petiole = 10.0
+    if dots is None:
+        warnings.append("the photo has no resolution (dots per inch): the leaf is 1 unit long; give --dpi for metres")
+        return petiole, 1.0
+    return petiole, float(np.clip(length_px / dots * METRES_PER_INCH, *SCALE_RANGE))
+
+
+def _fit_lobed(photo: Photo, traced: LeafOutline, frame: F64, outline: F64, measures: LobeMeasures, name: str,
+               dots: float | None, warnings: list[str], target: float, texture_size: int,
+               times: tuple[float, float, float]) -> ImageFit:
+    """The lobed branch of :func:`fit_image`: the closed margin (:func:`fit_lobed_margin`), scale
+    and petiole as for Ω, the texture addressed by the flat position (:func:`lobed_texture`)."""
+    t0, t1, t2 = times
+    length_px = float(np.hypot(*(traced.apex - traced.base)))
+    fitted = fit_lobed_margin(outline, target)
+    petiole, scale = _scale_and_petiole(traced, length_px, dots, warnings)
+    leaf = lobed_leaf(fitted, name)
+    parts = (leaf.replace(bending=replace(Bending(), petiole_length=petiole), transform=Transform(scale=scale)),)
+    pixel_from_leaf = np.asarray(np.linalg.inv(frame), np.float64)
+    t3 = time.perf_counter()
+    texture = lobed_texture(photo.rgb, traced.mask, pixel_from_leaf, sweep_table(leaf.lobes).window, texture_size)
+    t4 = time.perf_counter()
+    polygon = margin_pixels(parts, pixel_from_leaf)
+    curve = _apply(frame, polygon)
+    hd = hausdorff(np.vstack([curve, curve[:1]]), np.vstack([outline, outline[:1]]))
+    report: dict[str, Any] = {
+        "iou": round(top_view_iou(polygon, traced.blade), 5), "hausdorff_pct": round(100.0 * hd, 4),
+        "base_px": [round(float(c), 3) for c in traced.base], "apex_px": [round(float(c), 3) for c in traced.apex],
+        "length_px": round(length_px, 3), "rows": [], "row_residuals": [], "asymmetric": False,
+        "sides_differ": False, "halves_area_gain": 0.0, "symmetric_error_pct": None, "halves_error_pct": None,
+        "petiole_length": round(petiole, 5), "dpi": dots, "scale": scale, "cut_sides": list(traced.cut_sides),
+        "method": traced.method, "warnings": warnings,
+        "veins": VeinEstimate(False, "a lobed leaf: its veins are not traced").report(),
+        "lobed": True, "lobedness": measures.report(), "controls": len(fitted.outline),
+        "valleys": len(fitted.valleys), "seconds": 0.0}
+    t5 = time.perf_counter()
+    report["seconds"] = round(t5 - t0, 4)
+    report["stage_seconds"] = {"read": round(t1 - t0, 4), "outline": round(t2 - t1, 4), "fit": round(t3 - t2, 4),
+                               "texture": round(t4 - t3, 4), "veins": 0.0, "measures": round(t5 - t4, 4)}
     return ImageFit(parts, texture, traced, frame, report, tuple(warnings), photo)

@@ -37,8 +37,9 @@ from scipy import ndimage
 from leafview.core.params import Bending, LeafParams, ParamError
 from leafview.core.texture import uv_of_st
 from leafview.deform.surface import evaluate
+from leafview.deform.sweep import flat_of_uv
 
-__all__ = ["leaf_texture", "texture_uint8", "pixel_positions", "flat_top_view", "texel_uv", "MIN_TEXTURE_SIZE",
+__all__ = ["leaf_texture", "lobed_texture", "texture_uint8", "pixel_positions", "flat_top_view", "texel_uv", "MIN_TEXTURE_SIZE",
            "MAX_TEXTURE_SIZE", "GRID"]
 
 MIN_TEXTURE_SIZE = 16
@@ -183,3 +184,31 @@ def leaf_texture(rgb: NDArray[np.floating], mask: NDArray[np.bool_], parts: Sequ
 def texture_uint8(texture: NDArray[np.floating]) -> NDArray[np.uint8]:
     """A float texture in [0, 1] as the 8-bit pixels of its image file (rounded, straight alpha)."""
     return np.asarray(np.clip(np.rint(np.asarray(texture, np.float32) * 255.0), 0, 255), np.uint8)
+
+
+def lobed_texture(rgb: NDArray[np.floating], mask: NDArray[np.bool_], pixel_from_leaf: ArrayLike,
+                  window: tuple[float, float, float, float], size: int = 512) -> F32:
+    """The front texture (size, size, 4) of a lobed leaf: its texture coordinates are its flat
+    position in the sweep's texture ``window`` (Mündermann et al. 2003, eq. 1;
+    :func:`leafview.deform.sweep.texture_uv`), so texel (s, t) shows the photo at the leaf point
+    :func:`~leafview.deform.sweep.flat_of_uv` (:func:`~leafview.core.texture.uv_of_st` (s, t))
+    mapped by ``pixel_from_leaf``; alpha from ``mask``, the colour extended past the margin as
+    :func:`leaf_texture` does."""
+    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not MIN_TEXTURE_SIZE <= size <= MAX_TEXTURE_SIZE:
+        raise ParamError("texture_size", f"must be a whole number in {MIN_TEXTURE_SIZE}..{MAX_TEXTURE_SIZE}, "
+                                         f"got {size!r}")
+    img = np.asarray(rgb)
+    msk = np.asarray(mask, dtype=bool)
+    if img.ndim != 3 or img.shape[2] != 3 or msk.shape != img.shape[:2]:
+        raise ParamError("image", f"expected (h, w, 3) pixels and an (h, w) mask, got {img.shape} and {msk.shape}")
+    m = np.asarray(pixel_from_leaf, np.float64)
+    us, vs = texel_uv(int(size))                   # u of each column, v of each row
+    xs, ys = flat_of_uv(us, vs, window)            # their flat x and y
+    x = m[0, 0] * xs[None, :] + m[0, 1] * ys[:, None] + m[0, 2]
+    y = m[1, 0] * xs[None, :] + m[1, 1] * ys[:, None] + m[1, 2]
+    colour, alpha = _sample(img, msk, x, y)
+    out = np.empty((size, size, 4), np.float32)
+    out[..., :3] = _extend_colour(colour, alpha)
+    out[..., 3] = alpha
+    np.clip(out, 0.0, 1.0, out=out)
+    return out

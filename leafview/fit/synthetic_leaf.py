@@ -30,12 +30,14 @@ from leafview.core.io import load_params
 from leafview.core.params import Jitter, LeafParams
 from leafview.deform.surface import evaluate
 from leafview.errors import ParamError
+from leafview.fit.synthetic_lobed import LOBED_PRESETS, lobed_sides
 from leafview.resources import builtin_presets
 
 Arr = NDArray[np.float64]
 F32 = NDArray[np.float32]
 
 KINDS = ("preset", "landmark", "serrated", "asymmetric")
+LOBED = "lobed"              # a further kind, never drawn at random: a varied lobed preset (synthetic_lobed)
 SUPERSAMPLE = 4              # sub-rows per pixel row in :func:`coverage` (the x extent is exact)
 _MARGIN = 0.04               # free border kept round a leaf that is not cut, in shorter sides
 _NAMED = tuple(e.name for e in catalogue() if e.named)
@@ -145,11 +147,15 @@ def _landmark_view(rng: np.random.Generator, asymmetric: bool, serrate: bool) ->
     return TopView(right, left, axis, info)
 
 
-def _top_view(rng: np.random.Generator, kind: str, veined: bool = False) -> TopView:
+def _top_view(rng: np.random.Generator, kind: str, veined: bool = False, lobed_preset: str | None = None) -> TopView:
     """A random top view of ``kind``; ``veined``: a preset's (serrated or not, as ``kind`` says) of
-    :data:`VEINED_PRESETS` at its own width, so that the preset's vein tree lies on it exactly."""
-    presets = sorted(builtin_presets())
-    if veined:
+    :data:`VEINED_PRESETS` at its own width, so that the preset's vein tree lies on it exactly;
+    kind :data:`LOBED`: a varied lobed preset (``lobed_preset``, or one at random)."""
+    # the unilobed presets (a lobed one's top view is drawn by kind LOBED, from its own margin)
+    presets = sorted(name for name in builtin_presets() if name not in LOBED_PRESETS)
+    if kind == LOBED:
+        view = TopView(*lobed_sides(rng, lobed_preset))
+    elif veined:
         view = _preset_view(rng, str(rng.choice(VEINED_PRESETS)), kind == "serrated")
     elif kind == "preset":
         view = _preset_view(rng, str(rng.choice(presets)), False)
@@ -429,15 +435,18 @@ def _free_spot(rng: np.random.Generator, leaf: Placed, occupied: NDArray[np.bool
 
 
 def arrange(rng: np.random.Generator, n: int, kind: str, petiole: bool | None, size: tuple[int, int],
-             touching: bool, cut: str | None, veined: bool = False) -> tuple[list[Placed], dict[str, Any]]:
+             touching: bool, cut: str | None, veined: bool = False,
+             lobed_preset: str | None = None) -> tuple[list[Placed], dict[str, Any]]:
     """Draw ``n`` leaves (the first of ``kind``, the others of any kind) and place them on a page of
     ``size`` (width, height): the primary leaf (running off the ``cut`` border, if any), with
     ``touching`` a second one overlapping it, the rest clear of each other. Returns them and the
     layout's truth (cut, how far it runs off, touching, overlap). ``veined``: the primary leaf is
-    a preset's top view that a vein tree can be drawn on (see :func:`_top_view`)."""
+    a preset's top view that a vein tree can be drawn on (see :func:`_top_view`); ``lobed_preset``:
+    the lobed preset of a primary leaf of kind :data:`LOBED`."""
     leaves: list[Placed] = []
     for i in range(n):
-        view = _top_view(rng, kind if i == 0 else str(rng.choice(KINDS)), veined and i == 0)
+        view = (_top_view(rng, kind, veined, lobed_preset) if i == 0
+                else _top_view(rng, str(rng.choice(KINDS)), False))
         has_petiole = bool(rng.random() < 0.5) if petiole is None else petiole
         pet, plen = _petiole(rng) if has_petiole else (None, 0.0)
         leaves.append(Placed(view, pet, plen, 0.0, 1.0, np.zeros(2)))

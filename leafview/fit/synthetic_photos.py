@@ -50,8 +50,9 @@ from leafview.core.venation import Venation, venation_dict
 from leafview.deform.surface import evaluate
 from leafview.errors import ImageWriteError, ParamError
 from leafview.fit.blas import single_threaded
-from leafview.fit.synthetic_leaf import F32, KINDS, Arr, Placed, area_mask, arrange, coverage, paste, tree_veins
+from leafview.fit.synthetic_leaf import F32, KINDS, LOBED, Arr, Placed, area_mask, arrange, coverage, paste, tree_veins
 from leafview.fit.synthetic_leaf import SUPERSAMPLE as SUPERSAMPLE  # re-exported: coverage's default
+from leafview.fit.synthetic_lobed import LOBED_PRESETS
 from leafview.fit.synthetic_surfaces import (
     BACKGROUNDS,
     drop_shadow,
@@ -61,7 +62,7 @@ from leafview.fit.synthetic_surfaces import (
     scatter_debris,
 )
 
-__all__ = ["BACKGROUNDS", "CUTS", "KINDS", "VEINS", "SyntheticPhoto", "coverage", "synthetic_photo", "write_photo",
+__all__ = ["BACKGROUNDS", "CUTS", "KINDS", "LOBED", "LOBED_PRESETS", "VEINS", "SyntheticPhoto", "coverage", "synthetic_photo", "write_photo",
            "write_photo_set"]
 
 CUTS = ("left", "right", "top", "bottom")
@@ -166,7 +167,7 @@ MAX_PIXELS = 50_000_000
 
 def _check_options(seed: int, size: tuple[int, int], kind: str | None, background: str | None,
                    jpeg_quality: int | None, leaves: int, touching: bool, cut: str | None, empty: bool,
-                   veins: str) -> None:
+                   veins: str, lobed_preset: str | None = None) -> None:
     def integer(value: Any) -> bool:
         return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
 
@@ -175,8 +176,11 @@ def _check_options(seed: int, size: tuple[int, int], kind: str | None, backgroun
     if (not isinstance(size, (tuple, list)) or len(size) != 2 or not all(integer(v) and v >= 32 for v in size)
             or size[0] * size[1] > MAX_PIXELS):
         raise ParamError("size", f"must be (width, height), each >= 32 px, at most {MAX_PIXELS:,} pixels; got {size!r}")
-    if kind is not None and kind not in KINDS:
-        raise ParamError("kind", f"must be one of {', '.join(KINDS)}, got {kind!r}")
+    if kind is not None and kind not in KINDS + (LOBED,):
+        raise ParamError("kind", f"must be one of {', '.join(KINDS + (LOBED,))}, got {kind!r}")
+    if lobed_preset is not None and (lobed_preset not in LOBED_PRESETS or kind not in (None, LOBED)):
+        raise ParamError("lobed_preset", f"must be one of {', '.join(LOBED_PRESETS)} (with kind {LOBED!r} or "
+                                         f"unset), got {lobed_preset!r}")
     if background is not None and background not in BACKGROUNDS:
         raise ParamError("background", f"must be one of {', '.join(BACKGROUNDS)}, got {background!r}")
     if jpeg_quality is not None and (not integer(jpeg_quality) or not 0 <= jpeg_quality <= 100):
@@ -191,13 +195,14 @@ def _check_options(seed: int, size: tuple[int, int], kind: str | None, backgroun
         raise ParamError("empty", "an empty page has no leaves: leave touching, cut and leaves unset")
     if veins not in VEINS:
         raise ParamError("veins", f"must be one of {', '.join(VEINS)}, got {veins!r}")
-    if veins == "tree" and (empty or kind not in (None, "preset", "serrated")):
+    if veins == "tree" and (empty or kind not in (None, "preset", "serrated") or lobed_preset is not None):
         raise ParamError("veins", "a vein tree is drawn on a preset's leaf: kind must be preset, serrated or unset, "
                                   "and the page not empty")
 
 
 def _leaf_truth(leaf: Placed) -> dict[str, Any]:
-    return {"kind": leaf.view.info["kind"], "name": leaf.view.info["name"],
+    lobes = {"lobes": leaf.view.info["lobes"]} if "lobes" in leaf.view.info else {}
+    return {**lobes, "kind": leaf.view.info["kind"], "name": leaf.view.info["name"],
             "serration": leaf.view.info["serration"], "width_factor": leaf.view.info["width_factor"],
             "rotation_deg": math.degrees(leaf.theta) % 360.0, "length_px": leaf.length,
             "petiole_px": leaf.petiole_len * leaf.length, "base": leaf.px(np.zeros(2)).tolist(),
@@ -257,7 +262,7 @@ def _secondaries(leaf: Placed, tree: list[Vein]) -> tuple[tuple[Arr, ...], tuple
 def synthetic_photo(seed: int, *, size: tuple[int, int] = (1000, 1000), kind: str | None = None,
                     background: str | None = None, petiole: bool | None = None, jpeg_quality: int | None = None,
                     leaves: int = 1, touching: bool = False, cut: str | None = None,
-                    empty: bool = False, veins: str = "procedural") -> SyntheticPhoto:
+                    empty: bool = False, veins: str = "procedural", lobed_preset: str | None = None) -> SyntheticPhoto:
     """One seeded synthetic photo of a leaf on paper (see the module docstring).
 
     Parameters
@@ -268,6 +273,9 @@ def synthetic_photo(seed: int, *, size: tuple[int, int] = (1000, 1000), kind: st
         The image size in pixels.
     kind : str, optional
         ``preset``, ``landmark``, ``serrated`` or ``asymmetric`` (:data:`KINDS`); random if None.
+        ``lobed`` (:data:`LOBED`, never drawn at random): a lobed preset's margin with varied lobe
+        depth and spread (:mod:`leafview.fit.synthetic_lobed`); its apex is the terminal lobe's
+        tip (a bilobed leaf's: the sinus between its lobes).
     background : str, optional
         A paper of :data:`BACKGROUNDS`; random if None.
     petiole : bool, optional
@@ -289,8 +297,12 @@ def synthetic_photo(seed: int, *, size: tuple[int, int] = (1000, 1000), kind: st
         broad preset at its own width (serrated with ``kind="serrated"``) carrying a random
         pinnate :class:`~leafview.core.venation.Venation` drawn from a second stream of the seed,
         so the other draws stay as they are.
+    lobed_preset : str, optional
+        With kind ``lobed`` (implied when unset): ``maple``, ``oak`` or ``bilobed``; random if None.
     """
-    _check_options(seed, size, kind, background, jpeg_quality, leaves, touching, cut, empty, veins)
+    _check_options(seed, size, kind, background, jpeg_quality, leaves, touching, cut, empty, veins, lobed_preset)
+    if lobed_preset is not None:
+        kind = LOBED
     rng = np.random.default_rng(int(seed))
     w, h = int(size[0]), int(size[1])
     # drawn whatever the options, so that an option changes only what it names
@@ -301,7 +313,8 @@ def synthetic_photo(seed: int, *, size: tuple[int, int] = (1000, 1000), kind: st
     kind, background = kind or drawn_kind, background or drawn_paper
     quality = drawn_quality if jpeg_quality is None else int(jpeg_quality)
     n = 0 if empty else max(leaves, 2 if touching else 1)
-    placed, layout = arrange(rng, n, kind, petiole, (w, h), touching, cut, veins == "tree") if n else ([], {})
+    placed, layout = (arrange(rng, n, kind, petiole, (w, h), touching, cut, veins == "tree", lobed_preset) if n
+                      else ([], {}))
     faces = [bool(rng.random() < 0.3) for _ in placed]
 
     albedo, grain, paper_info = paper_surface(rng, h, w, background)

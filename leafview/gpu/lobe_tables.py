@@ -38,11 +38,9 @@ def is_lobed(params: LeafParams) -> bool:
 
 
 def lobe_texels(table: SweepTable) -> NDArray[np.float32]:
-    """The (4, N, 4) float32 texels of one layer: :func:`~leafview.deform.sweep.table_texels`, with
-    the table's ``cup`` in the spare w of texel row 2 (what ``lobe_eval`` reads it from)."""
-    texels = table_texels(table)
-    texels[2, :, 3] = table.cup
-    return texels
+    """The (4, N, 4) float32 texels of one layer: :func:`~leafview.deform.sweep.table_texels` (the
+    cup and the texture window in the spare w of texel row 2, where ``lobe_eval`` reads them)."""
+    return table_texels(table)
 
 
 def lobe_keys(leaves: Sequence[LeafParams]) -> list[Lobes]:
