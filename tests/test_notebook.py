@@ -69,6 +69,18 @@ def test_widget_frame_has_the_size_and_shows_the_leaf(gl, serrate) -> None:
     assert w.ui.children[0] is w and len(w.sliders) == len(KNOBS)
 
 
+def test_a_lobed_leaf_is_framed_whole(gl) -> None:
+    """Framing uses the drawn (swept) surface of a lobed leaf, not the default Ω."""
+    w = LeafWidget(LeafParams.load(resolve_preset("maple")), size=SIZE)
+    frame = w.get_frame()
+    bg = np.round(np.asarray(w.background[:3]) * 255)
+    leaf = np.abs(frame[..., :3].astype(np.float64) - bg).max(axis=-1) > 12
+    assert 0.1 < leaf.mean() < 0.9
+    assert not (leaf[0].any() or leaf[-1].any() or leaf[:, 0].any() or leaf[:, -1].any()), "a lobe cut off"
+    rows, cols = np.nonzero(leaf)
+    assert np.ptp(rows) > 0.5 * SIZE[1] or np.ptp(cols) > 0.5 * SIZE[0]   # filling the view
+
+
 def test_sliders_take_their_ranges_from_the_field_specs(gl, serrate) -> None:
     w = LeafWidget(serrate, size=SIZE)
     specs = field_specs()

@@ -11,8 +11,11 @@ import pytest
 from imgui_bundle import imgui  # a hard dependency: missing means broken, not skipped
 
 from leafview.app.hotreload import ShaderWatcher  # noqa: E402
+from leafview.app.lobe_handles import drag_lobe_handle, handle_flat
+from leafview.app.lobe_panel import with_branch_knots
 from leafview.app.orbit import project  # noqa: E402
 from leafview.app.viewer import BACKGROUND, Viewer, open_state  # noqa: E402
+from leafview.botany.lobes import builtin_lobed
 from leafview.core.params import LeafParams  # noqa: E402
 from leafview.export.images import PARAMS_ATTRIBUTE, read_image  # noqa: E402
 from leafview.gpu.layout import LEAF_BLOCK  # noqa: E402
@@ -289,3 +292,96 @@ def test_edit_latency_measure_runs(gl):
     res = measure_edit_latency(gl.ctx, pairs=2, warmup=1, size=(640, 400))
     assert res["edit_latency_ratio"] > 0 and res["viewer_frame_ms"] > 0
     assert res["viewer_edit_upload_bytes"] == LEAF_BLOCK.nbytes
+
+
+# -- a lobed leaf (leafview.app.lobe_handles, leafview.app.lobe_panel) -----------------------------
+@pytest.fixture
+def maple_viewer(gl, tmp_path):
+    path = builtin_presets()["maple"]
+    v = Viewer(gl.ctx, open_state(LeafParams.load(path), path), samples=0, screenshot_dir=tmp_path)
+    yield v
+    v.release()
+
+
+def _leaf_mask(img: np.ndarray, v: Viewer) -> np.ndarray:
+    """Pixels of the viewport (status line included) that differ from the background and the
+    ground grid: greenish leaf pixels."""
+    view = img[:, : int(v.layout(img.shape[1])[0])]
+    r, g, b = (view[..., i].astype(int) for i in range(3))
+    return (g > r + 15) & (g > b + 25)
+
+
+def test_maple_is_framed_with_its_lobe_handles(maple_viewer):
+    v = maple_viewer
+    img = frame(v, n=3)
+    mask = _leaf_mask(img, v)
+    assert mask.sum() > 0.04 * mask.size
+    assert not (mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any()), "leaf cut by a border"
+    rows, cols = np.nonzero(mask)
+    assert rows.max() - rows.min() > 0.4 * mask.shape[0]       # framed to fill the view, not a speck
+    names = v.overlay.handle_names
+    assert v.overlay.lobed and sum(n.startswith("tip:") for n in names) == 5
+    assert sum(n.startswith("valley:") for n in names) == 4 and len(v.overlay.fixed_world) >= 2
+    # the panel hides the Ω-only groups and shows the curve editors
+    assert "shape.a1" not in v.panel.rects and "lobes.branches[0].bend" in v.panel.rects
+    assert v.gl_errors == [] and v.internal_errors == 0
+
+
+def test_maple_tip_drag_through_the_viewport_changes_the_render(maple_viewer):
+    v = maple_viewer
+    base = frame(v, n=2)
+    sw = int(round(v.layout(SIZE[0])[0]))
+    names = v.overlay.handle_names
+    screen = project(v.camera.camera(sw, SIZE[1]), v.overlay.handle_world, sw, SIZE[1])
+    x, y = screen[names.index("tip:2")]
+    io = imgui.get_io()
+    io.add_mouse_pos_event(x, y)
+    frame(v)
+    assert v.input.hot == "tip:2"
+    before, az = v.state.params, v.camera.azimuth
+    io.add_mouse_button_event(0, True)
+    frame(v)
+    for k in range(1, 4):
+        io.add_mouse_pos_event(x + 8 * k, y + 5 * k)
+        frame(v)
+    io.add_mouse_button_event(0, False)
+    after = frame(v, n=2)
+    assert v.state.params.lobes.outline != before.lobes.outline and v.camera.azimuth == az
+    assert v.state.params.lobes.valleys == before.lobes.valleys
+    moved = np.any(np.abs(after[:-60, :sw].astype(int) - base[:-60, :sw].astype(int)) > 30, axis=-1)
+    assert moved.sum() > 100
+    screen = project(v.camera.camera(sw, SIZE[1]), v.overlay.handle_world, sw, SIZE[1])
+    assert np.hypot(*(screen[names.index("tip:2")] - (x + 24, y + 15))) < 8   # the handle followed
+    assert v.state.undo() and v.state.params == before and not v.state.can_undo
+
+
+def test_lobe_handle_drag_through_the_state_changes_the_render_and_refusal_keeps_it(maple_viewer):
+    v = maple_viewer
+    base = frame(v, n=2)
+    p = v.state.params
+    target = handle_flat(p.lobes, "valley:1") + np.array([0.05, -0.1])
+    assert v.state.apply(lambda q: drag_lobe_handle(q, "valley:1", target))
+    edited = frame(v)
+    sw = int(v.layout(SIZE[0])[0])
+    assert (np.abs(edited[:-60, :sw].astype(int) - base[:-60, :sw].astype(int)).max(axis=-1) > 30).sum() > 50
+    revision = v.state.revision
+    crossing = handle_flat(v.state.params.lobes, "tip:4") + np.array([-0.6, 0.2])
+    assert not v.state.apply(lambda q: drag_lobe_handle(q, "tip:4", crossing))
+    assert v.state.revision == revision and "crosses itself" in v.state.error
+    again = frame(v)
+    assert np.array_equal(again[:-60, :sw], edited[:-60, :sw])
+    # a turtle edit (the curve editor's model function) reaches the render too
+    assert v.state.apply(lambda q: with_branch_knots(q, 0, "bend", [0.0, 60.0, 60.0, 0.0]))
+    bent = frame(v)
+    assert (np.abs(bent[:-60, :sw].astype(int) - again[:-60, :sw].astype(int)).max(axis=-1) > 30).sum() > 50
+
+
+def test_opening_a_compound_file_shows_it_as_one_lobed_leaf(maple_viewer):
+    v = maple_viewer
+    frame(v)
+    assert v.state.open(builtin_lobed()["bilobed"])
+    assert v.state.params.lobes.enabled and v.state.path is None and not v.state.can_save
+    img = frame(v, n=2)
+    mask = _leaf_mask(img, v)
+    assert mask.sum() > 0.02 * mask.size and not (mask[0].any() or mask[-1].any() or mask[:, 0].any())
+    assert sum(n.startswith("tip:") for n in v.overlay.handle_names) == 2

@@ -8,13 +8,23 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 import pytest
 from imgui_bundle import imgui  # a hard dependency: missing means broken, not skipped
 
 from leafview.app.chrome import FileBar  # noqa: E402
-from leafview.app.panel import ParamPanel, decimals, from_ui, groups_of  # noqa: E402
+from leafview.app.lobe_panel import (
+    CURVES,
+    PLOT_HEIGHT,
+    branch_knots,
+    knot_from_mouse,
+    knot_positions,
+    with_branch_knots,
+)
+from leafview.app.panel import OMEGA_ONLY, ParamPanel, decimals, from_ui, groups_of  # noqa: E402
 from leafview.app.state import ViewerState  # noqa: E402
-from leafview.core.params import FieldSpec, field_specs  # noqa: E402
+from leafview.botany.lobe_skeleton import skeleton
+from leafview.core.params import FieldSpec, ParamError, field_specs  # noqa: E402
 from leafview.resources import builtin_presets, preset_dir  # noqa: E402
 
 SIZE = (700, 2200)
@@ -274,3 +284,74 @@ def test_ui_value_cleaning():
     assert from_ui(0.0, 0.10000000149011612) == 0.1
     assert from_ui([1 / 3, 0.0], [0.3333333432674408, 0.25]) == [1 / 3, 0.25]
     assert decimals(0.005) == 3 and decimals(1) == 0 and decimals(0.1) == 1
+
+
+# -- a lobed leaf (leafview.app.lobe_panel) ---------------------------------------------------------
+@pytest.fixture
+def maple_state(presets) -> ViewerState:
+    return ViewerState(presets["maple"], builtin_presets()["maple"], builtin_dir=preset_dir())
+
+
+def test_lobed_leaf_hides_the_omega_groups_and_shows_prune_cup_and_curves(ui, maple_state):
+    panel = ParamPanel(maple_state)
+    panel.expand_all = True
+    for _ in range(2):
+        ui.frame(_panel_draw(panel))
+    assert not any(k.split(".")[0] in OMEGA_ONLY for k in panel.rects), "Ω-only groups are hidden"
+    assert "hidden-groups" in panel.rects and "edit:lobed" in panel.rects and "edit:width" not in panel.rects
+    for key in ("lobes.prune", "lobes.cup", "material.translucency", "ripple.enabled", "transform.scale"):
+        assert key in panel.rects, key
+    branches = len(skeleton(maple_state.params.lobes).branches)
+    for b in range(branches):
+        for curve in CURVES:
+            x0, y0, x1, y1 = panel.rects[f"lobes.branches[{b}].{curve}"]
+            assert x1 - x0 > 50 and y1 - y0 >= PLOT_HEIGHT - 1
+    ui.drag(_panel_draw(panel), panel.rects["lobes.cup"], 0.5, 0.8)   # soft range -0.5 … 0.5
+    assert 0.2 < maple_state.params.lobes.cup < 0.4
+    assert maple_state.undo() and maple_state.params.lobes.cup == 0.0
+
+
+def test_curve_model_functions_add_and_remove_a_branch_edit(maple_state):
+    p = maple_state.params
+    assert branch_knots(p.lobes, 2, "twist") == (0.0,) * 4
+    q = with_branch_knots(p, 2, "twist", [0.0, 30.0, 30.0, 0.0])
+    assert [b.branch for b in q.lobes.branches] == [2] and q.lobes.branches[0].twist == (0.0, 30.0, 30.0, 0.0)
+    assert q.lobes.branches[0].bend == (0.0,) * 4 and branch_knots(q.lobes, 2, "twist")[1] == 30.0
+    r = with_branch_knots(q, 0, "bend", [10.0, 0.0, 0.0, 0.0])
+    assert [b.branch for b in r.lobes.branches] == [0, 2]
+    assert with_branch_knots(r, 0, "bend", [0.0] * 4).lobes.branches == q.lobes.branches   # all zero: removed
+    assert with_branch_knots(q, 2, "twist", [0.0] * 4).lobes.branches == ()
+    with pytest.raises(ParamError, match=r"lobes.branches\[0\].turn\[3\]"):
+        with_branch_knots(p, 1, "turn", [0.0, 0.0, 0.0, 1000.0])
+    rect = (100.0, 200.0, 400.0, 260.0)
+    pts = knot_positions(rect, -180.0, 180.0, [180.0, 0.0, -180.0, 90.0])
+    assert np.allclose(pts[:, 0], [100, 200, 300, 400]) and np.allclose(pts[:3, 1], [200, 230, 260])
+    assert knot_from_mouse(rect, -180.0, 180.0, 205.0, 215.0) == (1, 90.0)
+    assert knot_from_mouse(rect, -180.0, 180.0, 390.0, 100.0) == (3, 180.0)        # clamped
+    assert knot_from_mouse(rect, -180.0, 180.0, 390.0, 245.0, index=0) == (0, -90.0)  # the held knot
+
+
+def test_dragging_a_knot_edits_lobes_branches_as_one_undo_step(ui, maple_state):
+    panel = ParamPanel(maple_state)
+    panel.expand_all = True
+    draw = _panel_draw(panel)
+    for _ in range(2):
+        ui.frame(draw)
+    x0, y0, x1, y1 = panel.rects["lobes.branches[1].bend"]
+    io = imgui.get_io()
+    x = x0 + (x1 - x0) / 3            # knot s = 1/3
+    io.add_mouse_pos_event(x, (y0 + y1) / 2)
+    ui.frame(draw)
+    io.add_mouse_button_event(0, True)
+    ui.frame(draw)
+    for k in range(1, 5):             # up to three quarters of the plot's height
+        io.add_mouse_pos_event(x, (y0 + y1) / 2 - k * (y1 - y0) / 16)
+        ui.frame(draw)
+    io.add_mouse_button_event(0, False)
+    ui.frame(draw)
+    ui.frame(draw)
+    (edit,) = maple_state.params.lobes.branches
+    assert edit.branch == 1 and edit.bend[0] == edit.bend[2] == edit.bend[3] == 0.0
+    assert 80.0 <= edit.bend[1] <= 100.0, edit.bend    # soft range ±180: 3/4 of the height is +90
+    assert edit.twist == edit.turn == (0.0,) * 4
+    assert maple_state.undo() and maple_state.params.lobes.branches == () and not maple_state.can_undo

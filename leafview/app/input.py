@@ -12,7 +12,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from imgui_bundle import imgui
 
-from leafview.app.handles import drag_handle, drag_plane_normal, pick, plane_hit
+from leafview.app.handles import drag_handle, drag_plane_normal, pick, plane_hit, to_leaf_space
+from leafview.app.lobe_handles import drag_lobe_handle, handle_flat
 from leafview.app.orbit import project
 from leafview.app.photo_reference import marker_world, move_marker, plane_normal
 
@@ -31,6 +32,7 @@ class ViewportInput:
         self.viewer = viewer
         self.drag: dict[str, Any] | None = None   # kind, button, (handle, plane point, normal)
         self.hot: str | None = None
+        self.refused: str | None = None           # why the last lobe-handle move was refused
 
     def update(self, scene_w: float, h: int) -> None:
         """Call between ``imgui.new_frame()`` and drawing the panel."""
@@ -107,7 +109,7 @@ class ViewportInput:
         if self.drag is None:
             return
         if not imgui.is_mouse_down(self.drag["button"]):
-            if self.drag["kind"] == "handle":
+            if self.drag["kind"] in ("handle", "lobe"):
                 v.state.end_gesture()
             self.drag = None
             return
@@ -119,6 +121,8 @@ class ViewportInput:
             v.camera.pan(dx, dy, h)
         elif kind == "handle" and (dx or dy):
             self._move_handle(mx, my, scene_w, h)
+        elif kind == "lobe" and (dx or dy):
+            self._move_lobe_handle(mx, my, scene_w, h)
         elif kind == "marker" and (dx or dy):
             self._move_marker(mx, my, scene_w, h)
 
@@ -148,6 +152,10 @@ class ViewportInput:
         v = self.viewer
         assert v.overlay is not None
         i = v.overlay.handle_names.index(name)
+        self.refused = None
+        if v.overlay.lobed:
+            self._start_lobe_handle(name, v.overlay.handle_world[i])
+            return
         point, along = v.overlay.handle_world[i], float(v.overlay.handle_v[i])
         view_dir = point - v.camera.eye()
         assert v.overlay.frame is not None
@@ -166,3 +174,32 @@ class ViewportInput:
         leaf_point = d["frame"].to_leaf(hit, [d["v"]])[0]
         name = d["handle"]
         v.state.apply(lambda p: drag_handle(p, name, leaf_point), gesture=f"handle:{name}")
+
+    # -- lobed leaves (leafview.app.lobe_handles) ---------------------------------------------
+    def _start_lobe_handle(self, name: str, point: np.ndarray) -> None:
+        """A lobe tip or valley: moved in the leaf plane through its rim point; every move is
+        applied to the leaf as it was when the drag started (no drift, one undo step)."""
+        v = self.viewer
+        params = v.state.params
+        view_dir = point - v.camera.eye()
+        view_dir = view_dir / np.linalg.norm(view_dir)
+        m = params.transform.matrix()
+        normal = m[:3, 2] / np.linalg.norm(m[:3, 2])
+        if abs(float(np.dot(normal, view_dir))) < 0.15:   # the leaf plane seen edge-on
+            normal = -view_dir
+        self.drag = {"kind": "lobe", "button": imgui.MouseButton_.left, "handle": name, "point": point,
+                     "normal": normal, "base": params, "start": to_leaf_space(params, point)[0],
+                     "flat": handle_flat(params.lobes, name)}
+        self.hot = name
+
+    def _move_lobe_handle(self, mx: float, my: float, scene_w: float, h: int) -> None:
+        v, d = self.viewer, self.drag
+        assert d is not None
+        origin, direction = v.camera.ray(mx, my, int(round(scene_w)), h)
+        hit = plane_hit(origin, direction, d["point"], d["normal"])
+        if hit is None:
+            return
+        base, name = d["base"], d["handle"]
+        target = d["flat"] + (to_leaf_space(base, hit)[0] - d["start"])[:2]
+        changed = v.state.apply(lambda _: drag_lobe_handle(base, name, target), gesture=f"lobe:{name}")
+        self.refused = v.state.error if not changed and v.state.error else None

@@ -1,6 +1,7 @@
 """Viewport overlays drawn with ``shaders/overlay.vert``/``overlay.frag``: the control polygons
 and curves of A, S±, F± and G± (as in Chaurasia & Beardsley 2017, Figs 1 and 7), the drag handles and the ground
-grid.
+grid. A lobed leaf shows instead its skeleton (Mündermann et al. 2003, sec. 3.2), the margin's control polygon,
+its tip and valley handles and its display-only junctions (:mod:`leafview.app.lobe_handles`).
 
 Vertex data is rebuilt only when the leaf changes (the viewer passes its revision); every frame
 then costs one small uniform write and a few draws.
@@ -14,13 +15,14 @@ import moderngl
 import numpy as np
 from numpy.typing import NDArray
 
-from leafview.app.handles import HANDLE_NAMES, LeafFrame, handle_names, handle_parameters, handle_points
+from leafview.app.handles import HANDLE_NAMES, LeafFrame, handle_names, handle_parameters, handle_points, to_world
+from leafview.app.lobe_handles import lift_flat, lift_margin, lobe_handles, margin_offsets, skeleton_lines
 from leafview.core.bezier import bernstein
 from leafview.core.params import LeafParams
 from leafview.deform.surface import control_polygons
 from leafview.gpu.shaders import build_program
 
-__all__ = ["Overlay", "CURVE_COLORS", "control_lines", "ground_lines"]
+__all__ = ["Overlay", "CURVE_COLORS", "control_lines", "lobe_lines", "lobe_points", "ground_lines"]
 
 # sRGB colours (the target is 8-bit sRGB, like the leaf's output)
 CURVE_COLORS = {
@@ -29,6 +31,9 @@ CURVE_COLORS = {
     "F": (0.25, 0.75, 1.00),   # F (1/3 width): blue
     "G": (0.85, 0.45, 1.00),   # G (2/3 width): violet
 }
+SKELETON_COLOR = (0.95, 0.30, 0.20)   # a lobed leaf's skeleton: red, like the axis A
+MARGIN_COLOR = (1.00, 0.82, 0.15)     # its margin's control polygon: yellow, like S
+FIXED_COLOR = (0.62, 0.62, 0.66, 1.0)  # display-only points (junctions, root)
 HANDLE_COLOR = (1.0, 1.0, 1.0, 1.0)
 HANDLE_HOT = (1.0, 0.45, 0.1, 1.0)
 _CURVE_SAMPLES = 48
@@ -61,6 +66,40 @@ def control_lines(params: LeafParams, frame: LeafFrame | None = None) -> NDArray
             out["color"] = (*CURVE_COLORS[name[0]], alpha)
             chunks.append(out)
     return np.concatenate(chunks)
+
+
+def _lines(polylines: list[NDArray[np.float64]], color: tuple[float, ...]) -> NDArray:
+    chunks = []
+    for pts in polylines:
+        seg = _segments(pts)
+        out = np.empty(len(seg), _VERTEX)
+        out["pos"] = seg
+        out["color"] = color
+        chunks.append(out)
+    return np.concatenate(chunks) if chunks else np.zeros(0, _VERTEX)
+
+
+def lobe_lines(params: LeafParams) -> NDArray:
+    """Line vertices (world space) of a lobed leaf's skeleton (bright, each tip extended to its
+    anchor on the margin) and its margin's closed control polygon (dim)."""
+    ctrl = np.zeros((len(params.lobes.outline) + 1, 3))
+    ctrl[:-1, :2] = params.lobes.outline
+    # each control point moves with the drawn rim at its own curve point (t = j / m): bent and
+    # twisted branches carry the polygon with them
+    ctrl[:-1] += margin_offsets(params)
+    ctrl[-1] = ctrl[0]
+    skel = [to_world(params, line) for line in skeleton_lines(params)]
+    return np.concatenate([_lines([to_world(params, ctrl)], (*MARGIN_COLOR, 0.35)),
+                           _lines(skel, (*SKELETON_COLOR, 1.0))])
+
+
+def lobe_points(params: LeafParams) -> tuple[tuple[str, ...], NDArray[np.float64], NDArray[np.float64]]:
+    """A lobed leaf's handle names, their world positions (on the drawn rim) and the world
+    positions of its display-only points (junctions, root)."""
+    h = lobe_handles(params.lobes)
+    handles = to_world(params, lift_margin(params, h.w))
+    fixed = to_world(params, lift_flat(params, h.fixed_points))
+    return h.names, handles, fixed
 
 
 def _uniform(program: moderngl.Program, name: str) -> moderngl.Uniform:
@@ -102,6 +141,8 @@ class Overlay:
         self.handle_v = np.zeros(0)
         self.frame: LeafFrame | None = None
         self.handle_names: tuple[str, ...] = HANDLE_NAMES
+        self.fixed_world = np.zeros((0, 3))   # display-only points (a lobed leaf's junctions)
+        self.lobed = False
 
     def update(self, params: LeafParams, revision: int, ground_center: Sequence[float] | NDArray[np.float64],
                ground_z: float, ground_half: float) -> None:
@@ -111,11 +152,18 @@ class Overlay:
             return
         self._key = key
         self.frame = LeafFrame(params)
-        self.handle_names = handle_names(params)
-        self._lines = control_lines(params, self.frame)
-        hp, hv = handle_points(params), handle_parameters(params)
-        self.handle_v = np.array([hv[n] for n in self.handle_names])
-        self.handle_world = self.frame.to_world(np.array([hp[n] for n in self.handle_names]), self.handle_v)
+        self.lobed = params.lobes.enabled
+        if self.lobed:
+            self.handle_names, self.handle_world, self.fixed_world = lobe_points(params)
+            self.handle_v = np.zeros(len(self.handle_names))
+            self._lines = lobe_lines(params)
+        else:
+            self.handle_names = handle_names(params)
+            self._lines = control_lines(params, self.frame)
+            hp, hv = handle_points(params), handle_parameters(params)
+            self.handle_v = np.array([hv[n] for n in self.handle_names])
+            self.handle_world = self.frame.to_world(np.array([hp[n] for n in self.handle_names]), self.handle_v)
+            self.fixed_world = np.zeros((0, 3))
         step = 10 ** np.floor(np.log10(max(ground_half, 1e-3) / 2.0))
         self._ground = ground_lines(ground_center, ground_z, ground_half, step)
 
@@ -149,6 +197,11 @@ class Overlay:
         ctx.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
         try:
             self._draw(self._lines, moderngl.LINES, view_proj)
+            if len(self.fixed_world):
+                fixed = np.zeros(len(self.fixed_world), _VERTEX)
+                fixed["pos"] = self.fixed_world
+                fixed["color"] = FIXED_COLOR
+                self._draw(fixed, moderngl.POINTS, view_proj, point_size=6.0, round_points=True)
             pts = np.zeros(len(self.handle_world), _VERTEX)
             pts["pos"] = self.handle_world
             pts["color"] = HANDLE_COLOR

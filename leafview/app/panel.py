@@ -20,14 +20,17 @@ from typing import Any, Literal
 import numpy as np
 from imgui_bundle import imgui
 
+from leafview.app.lobe_panel import LobePanel
 from leafview.app.photo_reference import close_photo, fit_reference, report_line
 from leafview.app.state import ViewerState
 from leafview.core.edits import curve_axis, curve_longitudinal, scale_width, skew_axis
 from leafview.core.params import FieldSpec, LeafParams
 
-__all__ = ["ParamPanel", "decimals", "groups_of", "from_ui", "plain_label"]
+__all__ = ["ParamPanel", "decimals", "groups_of", "from_ui", "plain_label", "OMEGA_ONLY"]
 
-_OPEN_BY_DEFAULT = {"axis", "silhouette", "curvature", "jitter", "ripple", "bending", "material"}
+_OPEN_BY_DEFAULT = {"axis", "silhouette", "curvature", "jitter", "ripple", "bending", "material", "lobes"}
+#: groups that shape only the unilobed Ω: a lobed leaf (its sweep) ignores them, so they are hidden
+OMEGA_ONLY = ("axis", "silhouette", "curvature", "jitter", "bending", "venation")
 
 
 def decimals(step: float) -> int:
@@ -102,6 +105,7 @@ class ParamPanel:
         self._relative: dict[str, float] = {"width": 1.0, "skew": 0.0}
         self._base: dict[str, LeafParams] = {}
         self.expand_all = False  # open every header (tests, documentation screenshots)
+        self.lobes = LobePanel(state, self.draw_field, self._record)
 
     def label(self, text: str, path: str) -> str:
         shown = text if self.unicode_labels else plain_label(text)
@@ -183,15 +187,30 @@ class ParamPanel:
     def draw_groups(self) -> None:
         """A collapsing header per parameter group, in field_specs order."""
         specs = self.state.specs()
+        lobed = self.state.params.lobes.enabled
+        if lobed:
+            imgui.push_text_wrap_pos(0.0)
+            imgui.text_disabled(f"lobed leaf: the groups {', '.join(OMEGA_ONLY)} shape only the unilobed Ω "
+                                "and are hidden")
+            imgui.pop_text_wrap_pos()
+            self._record("hidden-groups")
         for group, paths in groups_of(specs).items():
+            if lobed and group in OMEGA_ONLY:
+                continue
             if self.expand_all:
                 imgui.set_next_item_open(True, imgui.Cond_.always)
             elif group in _OPEN_BY_DEFAULT:
                 imgui.set_next_item_open(True, imgui.Cond_.first_use_ever)
             if imgui.collapsing_header(f"{group.capitalize()}##group-{group}"):
                 imgui.push_id(group)
-                for path in paths:
-                    self.draw_field(path, specs[path])
+                if group == "lobes" and lobed:
+                    self.lobes.expand_all = self.expand_all
+                    self.lobes.draw(specs)
+                else:
+                    if group == "lobes":
+                        imgui.text_disabled("not a lobed leaf (no margin): open maple, oak or bilobed")
+                    for path in paths:
+                        self.draw_field(path, specs[path])
                 imgui.pop_id()
 
     # -- the artist edits of sec. 6 -------------------------------------------------------------
@@ -222,6 +241,13 @@ class ParamPanel:
         """Width scaling, asymmetry and curvature sliders (Chaurasia & Beardsley 2017, sec. 6, Fig. 7)."""
         imgui.set_next_item_open(True, imgui.Cond_.always if self.expand_all else imgui.Cond_.first_use_ever)
         if not imgui.collapsing_header("Edits (Chaurasia & Beardsley 2017 sec. 6)##group-edits"):
+            return
+        if self.state.params.lobes.enabled:
+            imgui.push_text_wrap_pos(0.0)
+            imgui.text_disabled("width, asymmetry and curvature edits act on the unilobed Ω (hidden): for a "
+                                "lobed leaf drag its tips and valleys, and use the turtle curves of the Lobes group")
+            imgui.pop_text_wrap_pos()
+            self._record("edit:lobed")
             return
         sh = self.state.params.shape
         self._relative_slider("width", "width ×", 0.25, 2.5, "×%.2f", scale_width)

@@ -18,6 +18,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from leafview.botany.lobe_outline import lobed_outline_params
+from leafview.botany.lobes import load_lobed_leaf
 from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.params import FieldSpec, LeafParams, ParamError, field_specs, parse_params
 
@@ -251,25 +253,37 @@ class ViewerState:
     def open(self, path: str | Path) -> bool:
         """Load a preset. On any error the message goes to :attr:`error` and nothing changes.
 
-        Opening replaces the history (the caller asks about unsaved edits first).
+        Opening replaces the history (the caller asks about unsaved edits first). A compound
+        (multilobed) leaf file (``lobed = 1``, :mod:`leafview.botany.lobes`) is opened as one
+        lobed margin (:func:`leafview.botany.lobe_outline.lobed_outline_params`, a few seconds);
+        it has no leaf file of its own then (save as writes one, never over the compound file).
         """
         p = Path(path).expanduser()
+        compound = False
         try:
             params = LeafParams.load(p)
         except ParamError as exc:
-            self.error = str(exc)
-            return False
+            try:
+                params = lobed_outline_params(load_lobed_leaf(p))
+                compound = True
+            except ParamError as lobed_exc:
+                # a compound file that fails says why; any other file keeps the leaf file's error
+                self.error = str(lobed_exc) if "lobed = 1" not in str(lobed_exc) else str(exc)
+                return False
+            except OSError:
+                self.error = str(exc)
+                return False
         except OSError as exc:
             self.error = f"{p}: cannot read: {exc.strerror or exc}"
             return False
-        self.path, self.preset, self.saved = p, params, params
+        self.path, self.preset, self.saved = (None if compound else p), params, params
         self._undo.clear()
         self._redo.clear()
         self._gesture = None
         self._set(params)
         self.loads += 1
         self.error = None
-        self.message = f"opened {p}"
+        self.message = f"opened {p}" + (" as one lobed margin (save as to keep it)" if compound else "")
         return True
 
     def is_builtin(self, path: Path | None = None) -> bool:

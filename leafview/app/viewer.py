@@ -35,8 +35,8 @@ from leafview.app.overlay import Overlay
 from leafview.app.panel import ParamPanel
 from leafview.app.photo_reference import PhotoLayer
 from leafview.app.state import ViewerState
+from leafview.botany.leaf_surface import drawn_grid, grid_points
 from leafview.core.params import LeafParams
-from leafview.deform.surface import tessellate
 from leafview.export.images import ImageWriteError, write_image
 from leafview.gpu.renderer import LeafRenderer, Lighting
 from leafview.gpu.targets import RenderTarget
@@ -148,9 +148,10 @@ class Viewer:
         return max(width - panel, 1.0), panel
 
     def leaf_points(self) -> NDArray[np.float64]:
-        """World positions of a coarse tessellation (framing and the ground grid)."""
+        """World positions of the coarse grid the leaf is drawn on (framing and the ground grid):
+        :func:`leafview.botany.leaf_surface.grid_points`, the swept surface of a lobed leaf."""
         p = self.state.params
-        return to_world(p, tessellate(p, 17, 33).vertices)
+        return to_world(p, grid_points(p, (17, 33)))
 
     def frame_leaf(self, aspect: float, *, reset: bool) -> None:
         """F (keep direction) or R (home direction): fit the leaf, re-place the ground grid."""
@@ -253,9 +254,11 @@ class Viewer:
         imgui.pop_item_width()
         imgui.end()
         self.files.draw_confirm()
-        nu, nv = view.grid
+        nu, nv = drawn_grid(self.state.params, view.grid)
         fps = f"{self.fps:5.1f} fps ({1000 / self.fps:.1f} ms)" if self.fps else "  –  fps"
         status = f"{fps}   {2 * (nu - 1) * (nv - 1):,} triangles   {self.gl_renderer}   H: keys"
+        if self.input.refused:   # a lobe handle that could not go where it was dragged
+            status = f"{status}\nhandle stays: {self.input.refused}"
         draw_status(imgui.ImVec2(8, h - 8), status, scene_w - 16)
         if view.show_help:
             draw_help(imgui.ImVec2(scene_w / 2, h / 2))

@@ -31,9 +31,9 @@ from numpy.typing import NDArray
 from leafview.app.handles import to_world
 from leafview.app.orbit import OrbitCamera
 from leafview.app.state import get_field, with_field
+from leafview.botany.leaf_surface import grid_points
 from leafview.core.edits import curve_axis, curve_longitudinal, scale_width, skew_axis
 from leafview.core.params import LeafParams, ParamError, field_specs
-from leafview.deform.surface import tessellate
 from leafview.errors import UsageError
 from leafview.gpu import default_renderer
 from leafview.gpu.scene import SceneRenderer
@@ -248,7 +248,8 @@ class LeafWidget(RemoteFrameBuffer):
     # -- the camera -----------------------------------------------------------------------------
     def _points(self) -> NDArray[np.float64]:
         if self._params is not None:
-            return to_world(self._params, tessellate(self._params, 17, 33).vertices)
+            # the drawn surface (a lobed leaf's sweep; deform.surface knows only Ω)
+            return to_world(self._params, grid_points(self._params, (17, 33)))
         assert self.scene is not None
         lo, hi = self.scene.bounds()
         return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
