@@ -48,7 +48,7 @@ from leafview.core.bspline import derivative_closed, evaluate_closed
 from leafview.core.lobes import Lobes
 from leafview.errors import ParamError
 
-__all__ = ["Margin", "Edge", "Skeleton", "margin_of", "skeleton", "build_skeleton", "VORONOI_SAMPLES"]
+__all__ = ["Margin", "Edge", "Skeleton", "margin_of", "skeleton", "build_skeleton", "ray_hit", "VORONOI_SAMPLES"]
 
 VORONOI_SAMPLES = 1000     # margin samples for the Voronoi diagram
 _TABLE_PER_CONTROL = 64    # dense arc-length table per control point
@@ -263,7 +263,7 @@ def _resample(p: NDArray[np.float64], h: float) -> NDArray[np.float64]:
     return q
 
 
-def _ray_hit(margin: Margin, p: NDArray[np.float64], d: NDArray[np.float64]) -> float | None:
+def ray_hit(margin: Margin, p: NDArray[np.float64], d: NDArray[np.float64]) -> float | None:
     """Arc-length fraction where the ray p + λ d (λ > 0) first meets the margin, or None."""
     a = margin.points
     b = np.roll(a, -1, axis=0)
@@ -402,7 +402,7 @@ def build_skeleton(outline: tuple[tuple[float, float], ...], prune: float, sampl
         back = cum[-1] - min(0.25 * cum[-1], 0.02 * size)
         q = np.array([np.interp(back, cum, p[:, 0]), np.interp(back, cum, p[:, 1])])
         d = p[-1] - q
-        w = _ray_hit(margin, p[-1], d) if np.linalg.norm(d) > 1e-12 else None
+        w = ray_hit(margin, p[-1], d) if np.linalg.norm(d) > 1e-12 else None
         tip_w[k] = margin.nearest(p[-1]) if w is None else w
     tip_w = np.where(np.isnan(tip_w), np.nan, np.clip(tip_w, 1e-9, 1.0 - 1e-9))
 

@@ -12,10 +12,13 @@ anchor. Anchors, one per node visit:
 * a terminal k_T: where the skeleton's tangent at k_T, extended, meets the margin (sec. 3.3);
 * a junction k_J: the margin point nearest k_J within the arc from the previous anchor to the next
   terminal's anchor (sec. 3.3, "the point of the segment [s, s_T] closest to k_J"), the arc's ends
-  trimmed by the junction's radius (at most a quarter of the arc each): where the junction's disc
-  touches the previous anchor, as at a pointed base, the segment would otherwise collapse onto the
-  skeleton; a user valley point (``lobes.valleys``) in that arc within twice the junction's radius
-  replaces it.
+  trimmed so that every segment keeps some margin: the previous one :data:`GAP` of its edge's
+  length, and so each segment still to come before that terminal, at least :data:`MIN_ARC` leaf
+  sizes each (a zero-length edge still fans), at most a quarter of the arc per end. (Trimming by
+  the junction's radius instead, as before, chained at maple's notched base: three junctions in a
+  row took the trimmed end of their arcs, and the basal lobe's first ties crossed its own edge.)
+  A user valley point (``lobes.valleys``) in that arc within twice the junction's radius replaces
+  the nearest point.
 
 Rows. An edge gets the same number n_e of rows on both traversals, a multiple of 4, and the n_e
 over both traversals add up to the table's rows exactly (largest remainder, in proportion to
@@ -26,6 +29,15 @@ and on the margin arc (blended with each foot's nearest margin point, made monot
 ties from crossing where the arc is much longer than the edge). The two traversals of an edge read
 their feet from one array of n_e + 1 samples, so paired feet are bitwise equal and the shader's
 grid welds without cracks.
+
+Folds. A tip's tie runs on along the skeleton's last step (from the foot before the tip through
+the tip to the margin), so the first flat triangle from it to the next tie, whose foot is that same
+foot before the tip, is collinear: a sliver of zero area, whose normal sweep_eval takes from the
+turtle (the paired feet make the tour's central difference zero there). Then :func:`_unfold` moves
+the other ties' margin points, one at a time and in order along the margin, until no flat
+triangle of the finest grid (``STRIP`` + 1 samples per tie) turns clockwise and no grid normal
+(whose tour tangent is the Catmull-Rom central difference) points down; the root's tie and the tip
+ties stay.
 
 Turtle (sec. 4, eqs 2-3 and the per-branch functions). Walking each edge in small steps, the flat
 heading H is the skeleton's direction, U = +z, L = U × H; the extra rotation rates of
@@ -46,7 +58,7 @@ from functools import lru_cache
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from leafview.botany.lobe_skeleton import Edge, Skeleton, skeleton
+from leafview.botany.lobe_skeleton import Edge, Skeleton, ray_hit, skeleton
 from leafview.core.blade import grid_indices
 from leafview.core.lobes import TURTLE_KNOTS, BranchTurtle, Lobes
 from leafview.deform.sweep import SWEEP_ROWS, SweepTable
@@ -56,6 +68,11 @@ __all__ = ["sweep_table", "build_sweep", "tour", "anchors", "edge_rows", "weld_g
 
 VALLEY_REACH = 2.0    # a valley point replaces a junction's anchor within this many radii
 BLEND = 0.15          # weight of the nearest-point correspondence in the margin spacing
+STRIP = 8             # samples along a tie checked for folds (the finest grid: 9)
+UNFOLD_TRIES = 32     # values tried per tie when unfolding
+UNFOLD_PASSES = 40    # sweeps of the local search, at most
+GAP = 0.25            # a junction's segments keep at least this share of their edge's length as arc ...
+MIN_ARC = 0.04        # ... and at least this many leaf sizes (a zero-length edge still fans)
 _KNOTS = np.linspace(0.0, 1.0, TURTLE_KNOTS)
 
 
@@ -94,10 +111,13 @@ def anchors(sk: Skeleton, trips: list[tuple[int, int]], valleys: tuple[tuple[flo
             w[k] = max(sk.tip_w[n], w[k - 1])
             continue
         lo, hi = w[k - 1], max(nxt[k], w[k - 1])
-        # keep clear of the arc's ends by the junction's radius (at most a quarter of the arc): where
-        # the junction's disc touches the previous anchor (a pointed base) the segment would collapse
-        cut = min(0.25 * (hi - lo), sk.radii[n] / sk.margin.length)
-        lo, hi = lo + cut, hi - cut
+        # every segment keeps some arc (GAP of its edge's length, at least MIN_ARC leaf sizes, at most a
+        # quarter of what is left), and so do the segments still to come before the next tip
+        rest = [sk.edges[trips[j][0]].length for j in range(k, m) if nxt[j] == nxt[k]]
+        least = MIN_ARC * sk.size
+        span = hi - lo
+        lo += min(0.25 * span, max(GAP * sk.edges[trips[k - 1][0]].length, least) / sk.margin.length)
+        hi -= min(0.25 * span, (GAP * sum(rest) + least * len(rest)) / sk.margin.length)
         p = sk.nodes[n]
         near = [(float(np.linalg.norm(np.asarray(v) - p)), x) for v, x in zip(valleys, vw)
                 if lo < x < hi and np.linalg.norm(np.asarray(v) - p) <= VALLEY_REACH * sk.radii[n]]
@@ -126,6 +146,95 @@ def edge_rows(sk: Skeleton, trips: list[tuple[int, int]], w: NDArray[np.float64]
         free = np.where(u > 1, ideal - u, np.inf)
         u[int(np.argmin(free))] -= 1
     return 4 * u
+
+
+def _cross(p: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
+    return p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0]
+
+
+def _strip_areas(k0: NDArray[np.float64], s0: NDArray[np.float64], k1: NDArray[np.float64], s1: NDArray[np.float64]
+                 ) -> NDArray[np.float64]:
+    """Signed doubled areas (q, 2 STRIP) of the flat triangles between ties (k0, s0) and (k1, s1),
+    each cut at t = i / STRIP, in :func:`leafview.core.blade.grid_indices` order: (A_i, B_i, A_i+1)
+    then (A_i+1, B_i, B_i+1), A on the first tie, B on the second."""
+    t = np.arange(STRIP + 1) / STRIP
+    a = k0[:, None] + t[None, :, None] * (s0 - k0)[:, None]
+    b = k1[:, None] + t[None, :, None] * (s1 - k1)[:, None]
+    first = _cross(b[:, :-1] - a[:, :-1], a[:, 1:] - a[:, :-1])
+    second = _cross(b[:, :-1] - a[:, 1:], b[:, 1:] - a[:, 1:])
+    return np.concatenate([first, second], axis=1)
+
+
+def _window_cost(k: NDArray[np.float64], s: NDArray[np.float64], sliver: NDArray[np.bool_], eps: float
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Defects around the middle tie of m windows of five consecutive ties, feet ``k`` and rims
+    ``s`` (m, 5, 2) (k may broadcast): (count, size) of the wrong-way flat triangles of the two quads
+    that touch the middle tie (``sliver`` (m, 2) or (2,): skip the quad's first triangle, a tip's
+    collinear sliver) plus the downward normals of ties 1-3. The normal of tie i is the sign of
+    D(t) × (s_i - k_i), D(t) = (k_i+1 - k_i-1) + t ((s_i+1 - s_i-1) - (k_i+1 - k_i-1)) the central
+    difference the Catmull-Rom spline takes at a grid row (:func:`leafview.deform.sweep.sweep_eval`),
+    linear in t: checked at t = 0 and 1. A zero difference (the paired feet around a tip) makes
+    sweep_eval fall back to the turtle's up axis, so it is no defect."""
+    m = len(s)
+    kk = np.broadcast_to(k, s.shape)
+    count = np.zeros(m)
+    size = np.zeros(m)
+    for q in range(2):
+        ar = _strip_areas(kk[:, 1 + q], s[:, 1 + q], kk[:, 2 + q], s[:, 2 + q])
+        ar[:, 0] = np.where(np.broadcast_to(sliver, (m, 2))[:, q], 0.0, ar[:, 0])
+        count += np.sum(ar < -eps, axis=1)
+        size += np.sum(np.maximum(-ar, 0.0), axis=1)
+    for i in (1, 2, 3):
+        tie = s[:, i] - kk[:, i]
+        for d in (kk[:, i + 1] - kk[:, i - 1], s[:, i + 1] - s[:, i - 1]):
+            z = _cross(d, tie)
+            scale = np.linalg.norm(d, axis=1) * np.linalg.norm(tie, axis=1)
+            bad = z < -1e-9 * scale
+            count += bad
+            size += np.where(bad, -z, 0.0)
+    return count, size
+
+
+def _unfold(sk: Skeleton, kj: NDArray[np.float64], wj: NDArray[np.float64], tips: NDArray[np.bool_]
+            ) -> NDArray[np.float64]:
+    """Move margin fractions ``wj`` (one per tie; the root's stays 0) so that no flat triangle between
+    consecutive ties turns the wrong way and no grid normal points down: a local search, one tie at
+    a time, over UNFOLD_TRIES values between its neighbours' fractions (the ties keep their order
+    along the margin), taking the value nearest the old one among those with the fewest defects
+    (:func:`_window_cost`). Only ties next to a defect move, so a fold-free sweep is unchanged.
+    ``tips`` marks the tip ties (their first triangle towards the next tie is a collinear sliver)."""
+    n = len(wj)
+    w = wj.copy()
+    eps = 1e-12 * sk.size * sk.size
+    s = sk.margin.at(w)
+    s[0] = kj[0]
+
+    def cost(j: int, cand: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        win = (j + np.arange(-2, 3)) % n
+        ss = np.repeat(s[win][None], len(cand), axis=0)
+        ss[:, 2] = sk.margin.at(np.mod(cand, 1.0))
+        return _window_cost(kj[win], ss, tips[win[1:3]], eps)
+
+    win = (np.arange(n)[:, None] + np.arange(-2, 3)[None]) % n
+    for _ in range(UNFOLD_PASSES):
+        moved = False
+        todo = np.nonzero(_window_cost(kj[win], s[win], tips[win[:, 1:3]], eps)[0])[0]
+        for j in todo[todo > 0]:
+            if cost(j, np.array([w[j]]))[0][0] == 0:
+                continue
+            if tips[j]:
+                continue
+            lo, hi = w[j - 1], (w[j + 1] if j + 1 < n else 1.0)
+            cand = np.concatenate([[w[j]], lo + (hi - lo) * (np.arange(1, UNFOLD_TRIES) / UNFOLD_TRIES)])
+            c, z = cost(j, cand)
+            i = int(np.lexsort((np.abs(cand - w[j]), z, c))[0])
+            if (c[i], z[i]) < (c[0], z[0]):
+                w[j] = cand[i]
+                s[j] = sk.margin.at(w[j])
+                moved = True
+        if not moved:
+            break
+    return w
 
 
 def _along(edge: Edge, s: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -230,9 +339,27 @@ def build_sweep(lobes: Lobes, rows: int = SWEEP_ROWS, blend: float = BLEND) -> S
         w_rows.append(wa + (wb - wa) * g)
         d_rows.append((e, idx))
     wj = np.concatenate(w_rows)
+    kj = np.concatenate([feet[e][idx] for e, idx in d_rows])
+    # a tip's tie runs on along the skeleton's last step: the ray from the foot before the tip
+    # through the tip meets the margin at the tie's rim, so the first triangle towards the next tie
+    # (k_tip, k_before, a point of the tip's tie) is collinear, exactly zero area (a sliver)
+    tips = np.zeros(len(wj), dtype=bool)
+    ray = np.zeros((len(wj), 2))
+    start = 0
+    for (e, direction), (_, idx) in zip(trips, d_rows):
+        n = int(n_e[e])
+        if direction < 0 and np.isfinite(sk.tip_w[sk.edges[e].end]):
+            d = feet[e][n] - feet[e][n - 1]
+            hit = ray_hit(sk.margin, feet[e][n], d) if np.linalg.norm(d) > 0.0 else None
+            before, after = wj[start - 1], wj[start + 1] if start + 1 < len(wj) else 1.0
+            if hit is not None and before < hit < after:
+                wj[start], tips[start], ray[start] = hit, True, d / np.linalg.norm(d)
+        start += len(idx)
+    wj = _unfold(sk, kj, wj, tips)
     s2 = sk.margin.at(wj)
     s2[0] = sk.margin.at(0.0)
-    kj = np.concatenate([feet[e][idx] for e, idx in d_rows])
+    along = np.sum((s2[tips] - kj[tips]) * ray[tips], axis=1)
+    s2[tips] = kj[tips] + along[:, None] * ray[tips]     # on the ray to rounding (the chord's sag off)
     dj = np.concatenate([dd[e][idx] for e, idx in d_rows])
     qj = np.concatenate([qq[e][idx] for e, idx in d_rows])
     k3 = np.zeros((len(kj), 3))
