@@ -2,7 +2,9 @@
 // What the culling pass needs of each leaf record (leafview/gpu/bounds.py): a leaf-space bounding
 // sphere and the outline error of every coarser level of detail, one invocation per record. The
 // leaf is evaluated with leaf_eval.glsl, the code leaf.vert draws with, at each level's (u, v)
-// grid (the drawn half of a one-sided leaf, as leaf.vert maps it):
+// grid (the drawn half of a one-sided leaf, as leaf.vert maps it; a lobed leaf's swept surface,
+// lobe_eval, unless LEAF_NO_LOBES: the grids are then its lobed grids, leafview/gpu/scene.py
+// lobed_levels, and the sweep tables are bound at LOBE_UNIT):
 //   * centre: the middle of the box of the coarsest level's points;
 //   * radius: distance from the centre to the farthest point of any level, plus
 //     variation · (largest |point|) + 1e-3 (leaves of a scene vary their control points by
@@ -51,6 +53,10 @@ vec3 pts[BOUNDS_COARSE];             // levels 1 and up
 // the point of grid sample (i, j) of a (nu × nv) grid: u = -1 + 2 i / (nu - 1), v = j / (nv - 1)
 vec3 grid_point(int i, int j, int nu, int nv) {
     vec2 uv = vec2(-1.0 + 2.0 * float(i) / float(nu - 1), float(j) / float(nv - 1));
+#ifndef LEAF_NO_LOBES
+    int lobe_layer = leaf_branch_lobe(LEAF);
+    if (lobe_layer >= 0) return lobe_eval(lobe_layer, uv).L;
+#endif
 #ifndef LEAF_NO_HALF
     float half_side = leaf_half(LEAF);
     if (half_side != 0.0) uv.x = 0.5 * (uv.x + half_side);

@@ -3,8 +3,10 @@
 // leaf: the leaf's bounding sphere (its species' leaf-space sphere, placed by the leaf's model
 // matrix) is tested against the six frustum planes and against a minimum projected size; a
 // visible leaf gets the coarsest (u, v) grid whose outline error stays under max_error_px pixels
-// and is appended to that level's list, whose draw command counts it. numpy reference:
-// leafview/gpu/scene.py, cull_reference().
+// and is appended to that level's list, whose draw command counts it. Species come in grid groups
+// (the species' lod_error[0], unused as an error: 0 the levels' grids, 1 a lobed species' own grids,
+// leafview/gpu/scene.py, lobed_levels); group g has group_levels[g] levels, whose draw commands start
+// at group_first[g]. numpy reference: leafview/gpu/scene.py, cull_reference().
 layout(local_size_x = 64) in;
 #include "generated/leaf_block.glsl"
 #include "generated/scene_blocks.glsl"
@@ -21,8 +23,9 @@ uniform vec4 eye;             // xyz camera position (w = 1) or view direction (
 uniform float pixel_scale;    // pixels per world unit at distance 1 (perspective) or anywhere (ortho)
 uniform float min_pixels;     // leaves whose sphere spans fewer pixels are dropped
 uniform float max_error_px;   // largest outline error allowed for a coarser level
-uniform int levels;           // number of levels of detail (grids)
-uniform int forced_level;     // >= 0: every visible leaf at this level (LOD off)
+uniform ivec2 group_levels;   // levels of detail (grids) of each grid group
+uniform ivec2 group_first;    // the draw command of each group's finest level
+uniform int forced_level;     // >= 0: every visible leaf at this level (LOD off; the group's last at most)
 uniform bool frustum;         // false: no frustum or size test (culling off)
 
 void main() {
@@ -40,11 +43,14 @@ void main() {
             if (dot(planes[k].xyz, center) + planes[k].w < -radius) return;
         if (2.0 * radius * ppu < min_pixels) return;
     }
-    int level = forced_level;
-    if (level < 0) {
+    int group = sc.lod_error[0] >= 1.0 ? 1 : 0;
+    int levels = group_levels[group];
+    int level = min(forced_level, levels - 1);
+    if (forced_level < 0) {
         level = 0;
         while (level + 1 < levels && sc.lod_error[level + 1] * scale * ppu <= max_error_px) ++level;
     }
-    uint slot = atomicAdd(commands[level].instance_count, 1u);
-    visible[commands[level].base_instance + slot] = i;
+    int command = group_first[group] + level;
+    uint slot = atomicAdd(commands[command].instance_count, 1u);
+    visible[commands[command].base_instance + slot] = i;
 }

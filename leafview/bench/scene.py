@@ -9,6 +9,11 @@
   measurement (:func:`leafview.bench.instancing.instanced_vs_baked`), so both suites report the
   same quantity;
 * the 10⁶-leaf field: build, upload and one 1280×720 frame, wall time (not in ``--quick``);
+* ``lobed_frame_ratio``: ms/frame of the 10⁴-leaf field (10³ in ``--quick``) with every leaf
+  ``maple`` (lobed, drawn from its sweep table on its lobed grids) ÷ the same field with every
+  leaf ``ovate``: the same placements, cameras and size, culling and LOD on, the two renderers'
+  frames interleaved (median of the per-pair ratios), the worse of the ``ground`` and
+  ``three-quarter`` cameras (goal ≤ 2; per camera in ``lobed_views``);
 * ``leaf_set_upload_ms_per_leaf``: a leaf set of 10⁴ explicit leaves (10³ in ``--quick``), each
   its own species and shape (the field's leaves, placed, bending off):
   :func:`~leafview.scene.spec.scene_from_leaves` and the :class:`~leafview.gpu.scene.SceneRenderer`
@@ -41,10 +46,11 @@ from leafview.scene.spec import SceneSpec, build_scene, scene_from_leaves
 __all__ = ["run", "format_table", "GOALS", "BENT_SPECIES"]
 
 GOALS = {"lod_speedup": 2.0, "param_vs_baked_speed": 0.9, "baked_vs_param_bytes": 250.0,
-         "million_leaf_seconds": 10.0, "leaf_set_upload_ms_per_leaf": 0.05}
+         "million_leaf_seconds": 10.0, "leaf_set_upload_ms_per_leaf": 0.05, "lobed_frame_ratio": 2.0}
 SIZE = (1280, 720)
 SPECIES = ("ovate", "lanceolate", "elliptic")
 BENT_SPECIES = ("maize", "willow")   # the presets that bend (cantilever load, twist, petiole)
+LOBED_PAIR = ("maple", "ovate")      # lobed_frame_ratio: every leaf the first ÷ every leaf the second
 
 
 def _spec(n: int, species: tuple[str, ...] = SPECIES) -> SceneSpec:
@@ -64,12 +70,53 @@ def _leaf_set_ms(ctx: moderngl.Context, leaves: list[LeafParams], repeats: int) 
     return 1e3 * statistics.median(times) / len(leaves)
 
 
+def lobed_frame_ratio(ctx: moderngl.Context, target: OffscreenTarget, n: int, pairs: int,
+                      views: tuple[str, ...] = ("ground", "three-quarter"),
+                      pair: tuple[str, str] = LOBED_PAIR) -> dict[str, Any]:
+    """ms/frame of an ``n``-leaf field whose every leaf is ``pair[0]`` and of the same field whose
+    every leaf is ``pair[1]`` (same seed, hence the same placements; for each view one camera,
+    framed on the second; culling and LOD on), measured in ``pairs`` interleaved pairs of frames.
+    A view's ratio is the median of its pairs' ratios; ``lobed_frame_ratio`` is the largest."""
+    scenes = [build_scene(_spec(n, (name,))) for name in pair]
+    on = CullSettings()
+    out: dict[str, Any] = {"lobed_species": list(pair), "lobed_leaves": n, "lobed_views": {}}
+    with SceneRenderer(ctx, scenes[0]) as a, SceneRenderer(ctx, scenes[1]) as b:
+        out["lobed_grids"] = [list(g) for g in a.command_grids]
+        for view in views:
+            camera = scene_camera(scenes[1], SIZE, view)
+            frames = []
+            for r in (a, b):
+                r.set_camera(camera, SIZE)
+
+                def frame(r: SceneRenderer = r) -> None:
+                    target.use()
+                    target.clear()
+                    r.draw(on)
+
+                frame()
+                ctx.finish()
+                frames.append(frame)
+            times: list[list[float]] = [[], []]
+            for _ in range(pairs):
+                for k in (0, 1):
+                    times[k].append(median_time(frames[k], 1, ctx.finish))
+            check_error(ctx, "lobed scene frames")
+            counts = [r.level_counts() for r in (a, b)]
+            out["lobed_views"][view] = {
+                "ratio": statistics.median(x / y for x, y in zip(*times)),
+                "lobed_ms": 1e3 * statistics.median(times[0]), "unlobed_ms": 1e3 * statistics.median(times[1]),
+                "lobed_triangles": a.triangles(counts[0]), "unlobed_triangles": b.triangles(counts[1]),
+                "lobed_counts": [int(c) for c in counts[0]], "unlobed_counts": [int(c) for c in counts[1]]}
+    out["lobed_frame_ratio"] = max(v["ratio"] for v in out["lobed_views"].values())
+    return out
+
+
 def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, Any]:
     """Run the scene benchmarks on ``ctx`` (default a new headless context); see the module
     docstring for what is measured."""
     leaf_counts = (1_000, 5_000) if quick else (1_000, 10_000, 100_000)
     on, off = CullSettings(), CullSettings(cull=False, lod=False)
-    with bench_context(ctx) as ctx, Progress(len(leaf_counts) + 4) as progress:
+    with bench_context(ctx) as ctx, Progress(len(leaf_counts) + 5) as progress:
         res: dict[str, Any] = {**gl_info(ctx), "size": list(SIZE), "quick": quick, "species": list(SPECIES),
                                "frames": {}}
         with OffscreenTarget(ctx, SIZE) as target:
@@ -104,6 +151,8 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
                             res["lod_off_ms"] = 1e3 * statistics.median(t_off)
                         check_error(ctx, f"scene frame ({n} leaves, {view})")
                     res["frames"][str(n)] = row
+            progress.step("lobed vs unlobed")
+            res.update(lobed_frame_ratio(ctx, target, 1_000 if quick else 10_000, 3 if quick else 7))
             progress.step("leaf sets")
             for key, n_set, bent in (("leaf_set_upload_ms_per_leaf", 1_000 if quick else 10_000, False),
                                      ("leaf_set_bent_ms_per_leaf", 100 if quick else 1_000, True)):
@@ -155,6 +204,13 @@ def format_table(res: dict[str, Any]) -> str:
     lines.append(f"lod_speedup            {res['lod_speedup']:.2f}×  ({goal('lod_speedup')}; "
                  f"{res['lod_speedup_leaves']:,} leaves, ground camera, off {res['lod_off_ms']:.0f} ms)")
     lines.append(f"lod_switch_px          {res['lod_switch_px']:.2f} px (largest outline change at a level switch)")
+    if "lobed_frame_ratio" in res:
+        views = "; ".join(f"{view} {v['ratio']:.2f}× ({v['lobed_ms']:.0f} vs {v['unlobed_ms']:.0f} ms, "
+                          f"{v['lobed_triangles']:,} vs {v['unlobed_triangles']:,} triangles)"
+                          for view, v in res["lobed_views"].items())
+        lines.append(f"lobed_frame_ratio      {res['lobed_frame_ratio']:.2f}×  ({goal('lobed_frame_ratio', True)}; "
+                     f"{res['lobed_leaves']:,} leaves, every one {res['lobed_species'][0]} ÷ every one "
+                     f"{res['lobed_species'][1]}, worst camera; {views})")
     lines.append(f"leaf_set_upload_ms_per_leaf {res['leaf_set_upload_ms_per_leaf']:.3f} ms  "
                  f"({goal('leaf_set_upload_ms_per_leaf', True)}; {res['leaf_set_upload_leaves']:,} explicit leaves, "
                  f"a shape each: scene and GPU set-up; bent: {res['leaf_set_bent_ms_per_leaf']:.2f} ms, "

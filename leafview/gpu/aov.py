@@ -20,6 +20,12 @@ Textured leaves (:mod:`leafview.gpu.textures`) are labelled where the picture sh
 label pass discards the texels whose alpha is below 0.5, as the picture does, so holes and teeth
 of the mask show what lies behind them in both.
 
+Lobed leaves (``LeafParams.lobes``) are labelled like the others, drawn on their own grids by the
+same multi-draws (:class:`~leafview.gpu.scene.SceneRenderer`): their ``instance``, ``depth`` and
+``normal`` mean the same; their ``uv`` is the flat leaf's position (x, y in leaf lengths, the
+margin's plane, Mündermann et al. 2003, eq. 1), which is what ``leaf.vert`` shades a swept
+surface at, not the (u, v) of Ω.
+
 Stems take part in the label pass: they hide the leaves behind them and write their depth and
 normal, but their instance is 0 and their (u, v) is (0, 0), like the background. A pixel with
 ``instance == 0`` and ``depth > 0`` is therefore a stem.
@@ -70,8 +76,8 @@ class AovImages:
         side's normal, negated on back faces), interpolated over the drawn triangle; stems have
         theirs; 0 background.
     uv: (h, w, 2) float32, the leaf's own (u, v) (``v_uv`` of ``leaf.vert``: u in [-1, 1] across
-        the blade, one-sided leaves already mapped to their half; v in [0, 1] base to apex);
-        0 background and stems.
+        the blade, one-sided leaves already mapped to their half; v in [0, 1] base to apex; a
+        lobed leaf's flat position instead); 0 background and stems.
     """
 
     rgb: NDArray[np.uint8] | None = None

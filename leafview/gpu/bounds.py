@@ -4,8 +4,14 @@ at every level's (u, v) grid with the code the vertex shader draws with and writ
 the outline error of each coarser level), all records in one dispatch per chunk. Nothing per
 record happens in Python.
 
+Lobed records are evaluated on their swept surface (``lobe_eval``, the sweep tables bound at
+``LOBE_UNIT`` by the caller) unless the features hold ``LEAF_NO_LOBES``; their grids are then the
+lobed ones (:func:`leafview.gpu.scene.lobed_levels`): :class:`~leafview.gpu.scene.SceneRenderer`
+runs lobed and unlobed records apart, each on its grids.
+
 The numpy reference is :func:`leafview.gpu.scene.cull_rows_from_points` (through
-:func:`leafview.gpu.scene.species_cull`); a test compares the rows read back here with it.
+:func:`leafview.gpu.scene.species_cull`, which evaluates lobed species with
+:func:`leafview.botany.leaf_surface.evaluate`); tests compare the rows read back here with it.
 """
 
 from __future__ import annotations
@@ -78,7 +84,8 @@ class LeafBounds:
             *, block_limit: int = MAX_RESOURCE_BYTES) -> NDArray[Any]:
         """SPECIES_CULL_BLOCK rows of the LEAF_BLOCK ``records`` (their derived members are
         filled here by the prepare pass), for leaves varying by ± ``variation``. ``features``:
-        the leaf program's feature defines (:func:`~leafview.gpu.layout.feature_defines`).
+        the leaf program's feature defines (:func:`~leafview.gpu.layout.feature_defines`, and
+        :func:`~leafview.gpu.layout.lobe_defines`: without ``LEAF_NO_LOBES`` lobed records are swept).
         Records go up in chunks of at most ``block_limit`` bytes."""
         out = np.zeros(len(records), SPECIES_CULL_BLOCK.dtype)
         if not len(records):

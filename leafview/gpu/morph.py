@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from leafview.botany import leaf_surface
 from leafview.botany.asymmetric import ShaderLeaves, shader_leaves
 from leafview.botany.catalogue import load_landmark_leaf
 from leafview.botany.landmarks import LandmarkLeaf
@@ -166,13 +167,16 @@ def morph_sequence(source: LandmarkLeaf, target: LandmarkLeaf,
 
 def shared_camera(leaves: Sequence[LeafParams], view: str, size: tuple[int, int],
                   grid: tuple[int, int] = (33, 129)) -> Any:
-    """One camera framing every leaf of ``leaves`` (the union of their numpy-evaluated grids)."""
+    """One camera framing every leaf of ``leaves`` (the union of their numpy-evaluated grids: a
+    lobed leaf's swept surface on its lobed grid, :func:`leafview.botany.leaf_surface.grid_points`,
+    not Ω, whose outline would cut its basal lobes off)."""
 
     uv = grid_uv(*grid).astype(np.float64)
     points = []
     for p in leaves:
         m = p.transform.matrix()
-        points.append(evaluate(p, uv[:, 0], uv[:, 1]) @ m[:3, :3].T + m[:3, 3])
+        local = leaf_surface.grid_points(p, grid) if p.lobes.enabled else evaluate(p, uv[:, 0], uv[:, 1])
+        points.append(local @ m[:3, :3].T + m[:3, 3])
     return frame_view(view, np.concatenate(points), size)
 
 

@@ -21,6 +21,20 @@ indirect multi-draws as plain species. Veined species the same way: one vein fie
 species (:class:`~leafview.gpu.vein_draw.VeinDraw`; species with the same shape and venation
 share one), which every leaf of the species reads; ``veins=False`` draws none.
 
+Lobed species (``LeafParams.lobes`` with an outline) draw in the same multi-draws too: their sweep
+tables are one array texture (:class:`~leafview.gpu.lobe_tables.LobeTables`, a layer per distinct
+:class:`~leafview.core.lobes.Lobes`), bound for the whole scene, and their leaves are drawn on
+grids of their own, :attr:`SceneRenderer.lobed_grids` (:func:`lobed_levels`: the lobed grid of each
+level's grid, :func:`~leafview.deform.sweep.lobed_grid`), appended to the levels' grids as further
+draw commands. A species' culling row says which grids it is drawn on (``lod_error[0]``, unused as
+an error, holds its *grid group*: 0 the levels' grids, 1 the lobed ones); the culling pass picks a
+lobed leaf's level by the same screen-space error rule, among its group's levels, and appends it
+to command ``group_first[group] + level``. A scene without lobed species has one group and compiles
+its programs with ``LEAF_NO_LOBES`` (:func:`~leafview.gpu.layout.lobe_defines`): it pays nothing.
+A lobed leaf's Ω is not its shape, so per-leaf shape variation leaves it alone
+(:func:`leafview.scene.spec.build_scene` gives its leaves factors of 1): lobed leaves of a species
+differ by their transform and colour only.
+
 No per-leaf work happens on the CPU after the scene is uploaded. Leaf rows are
 :data:`~leafview.gpu.layout.LEAF_BLOCK` records (the same declaration as the single-leaf uniform
 block); a batch holds at most ``GL_MAX_SHADER_STORAGE_BLOCK_SIZE`` bytes of them, so large scenes
@@ -38,11 +52,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.ndimage import distance_transform_edt
 
+from leafview.botany import leaf_surface
 from leafview.botany.vein_shape import shape_grid
 from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.params import Bending, LeafParams
 from leafview.deform.beam import bend_profiles
 from leafview.deform.surface import drawn_uv, evaluate, grid_indices, grid_uv
+from leafview.deform.sweep import lobed_grid
 from leafview.errors import SceneLimitError
 from leafview.gpu.bounds import LeafBounds
 from leafview.gpu.context import check_error
@@ -63,17 +79,20 @@ from leafview.gpu.layout import (
     VERTICES_BINDING,
     VISIBLE_BINDING,
     feature_defines,
+    lobe_defines,
     needs_row_texture,
     pack_leaves,
     ripple_keys,
     texture_defines,
     texture_layers,
     vein_defines,
+    write_lobe_layers,
     write_slot,
     write_texture_layers,
     write_vein_layers,
 )
 from leafview.gpu.limits import check_scene, ensure_alive
+from leafview.gpu.lobe_tables import LobeTables, lobe_keys
 from leafview.gpu.owner import GLObjects
 from leafview.gpu.resources import GpuResources, JitterTable, RowTexture, record_vertex_array
 from leafview.gpu.textures import LeafTextures
@@ -83,19 +102,42 @@ from leafview.scene.camera import Camera, top_down
 from leafview.scene.spec import VBAR_GAP, Scene, SceneSpec
 
 __all__ = ["LOD_GRIDS", "CullSettings", "SceneRenderer", "SceneLimitError", "pack_scene", "species_cull", "plan_batches",
-           "frustum_planes", "cull_reference"]
+           "frustum_planes", "cull_reference", "lobed_levels", "lobed_species", "LOD_NEVER"]
 
 LOD_GRIDS: tuple[tuple[int, int], ...] = ((9, 17), (5, 9), (3, 5))  # 256, 64, 16 triangles
 STEM_FRONT = (0.30, 0.22, 0.14, 0.0)
 STEM_BACK = (0.30, 0.22, 0.14)
 _LOCAL = 64
+LOD_NEVER = 1e30
+"""``lod_error`` of a level a species has not (a lobed species' levels beyond :func:`lobed_levels`):
+never picked."""
+LOBED_GROUP = 1   # a lobed species' grid group (its culling row's lod_error[0])
+
+
+def lobed_levels(grids: Sequence[tuple[int, int]]) -> tuple[tuple[int, int], ...]:
+    """The grids a scene's lobed leaves are drawn on, finest first: the lobed grid of each level's
+    grid (:func:`~leafview.deform.sweep.lobed_grid`), repeats dropped (the default levels all map to
+    (2, 65): a tie is straight unless cupped, and 65 rows is the coarsest tour that keeps the ties'
+    pairing, so lobed leaves have one level there)."""
+    out: list[tuple[int, int]] = []
+    for g in grids:
+        lg = lobed_grid((int(g[0]), int(g[1])))
+        if lg not in out:
+            out.append(lg)
+    return tuple(out)
+
+
+def lobed_species(scene: Scene) -> NDArray[np.bool_]:
+    """(S,) whether each species of ``scene`` is lobed (drawn from a sweep table)."""
+    return np.array([bool(sp.lobes.enabled) for sp in scene.species], bool)
 # the stems' vertex record: (attribute, format, the same bytes skipped)
 _STEM_ATTRS = (("in_position", "3f", "12x"), ("in_normal", "3f", "12x"), ("in_uv", "2f", "8x"),
                ("in_front", "4f1", "4x"), ("in_back", "4f1", "4x"))
 
 
 # -- packing (numpy) ------------------------------------------------------------------------------
-def species_tables(scene: Scene, vein_layers: NDArray[np.int32] | None = None
+def species_tables(scene: Scene, vein_layers: NDArray[np.int32] | None = None,
+                   lobe_layers: NDArray[np.int32] | None = None
                    ) -> tuple[NDArray[Any], NDArray[np.float32], list[tuple[int, float]]]:
     """Per-species LEAF_BLOCK records, the jitter table rows they index and the ripple signal keys
     (row i of the signal buffer), equal to :func:`~leafview.gpu.layout.pack_leaves` of the species.
@@ -108,7 +150,11 @@ def species_tables(scene: Scene, vein_layers: NDArray[np.int32] | None = None
     Each species' texture layers are those of :func:`~leafview.gpu.layout.texture_keys` of the
     species (the array texture :class:`SceneRenderer` binds), its vein layer ``vein_layers[i]``
     (default: :func:`leafview.gpu.vein_draw.fresh_layers` of the species, the layers of a field
-    array built for them, as :class:`SceneRenderer` builds it; -1 without veins)."""
+    array built for them, as :class:`SceneRenderer` builds it; -1 without veins), its sweep-table
+    layer ``lobe_layers[i]`` (default: the index of its :class:`~leafview.core.lobes.Lobes` among
+    :func:`~leafview.gpu.lobe_tables.lobe_keys` of the species, as
+    :meth:`LobeTables.update <leafview.gpu.lobe_tables.LobeTables.update>` returns it; -1
+    unlobed). A lobed species draws no veins (its vein layer is -1)."""
     index: dict[tuple[Any, ...], int] = {}
     by_identity: dict[tuple[int, ...], int] = {}   # the same objects (shared by the species) hash once
     templates: list[LeafParams] = []
@@ -141,7 +187,15 @@ def species_tables(scene: Scene, vein_layers: NDArray[np.int32] | None = None
         for j, name in enumerate(("a1", "a2", "vbar", "xs", "zs", "zf", "zg", "front", "back")):
             recs[name][:, :3] = col[:, 3 * j:3 * j + 3]
         write_texture_layers(recs, texture_layers(scene.species))
-        write_vein_layers(recs, fresh_layers(scene.species) if vein_layers is None else vein_layers)
+        if lobe_layers is None:
+            layer_of = {k: i for i, k in enumerate(lobe_keys(scene.species))}
+            lobe_layers = np.array([layer_of.get(sp.lobes, -1) if sp.lobes.enabled else -1 for sp in scene.species],
+                                   np.int32)
+        veins = np.array(fresh_layers(scene.species) if vein_layers is None else vein_layers, np.int32)
+        lobed = np.asarray(lobe_layers) >= 0
+        veins[np.broadcast_to(lobed, veins.shape)] = -1   # a swept surface has no veins
+        write_vein_layers(recs, veins)
+        write_lobe_layers(recs, np.asarray(lobe_layers, np.int32))
     if bent:
         first: dict[int, int] = {}                 # bend problem -> the first species that poses it
         for i, b in bent:
@@ -211,12 +265,13 @@ def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
 def _lod_error(params: Any, coarse: tuple[int, int], fine: tuple[int, int] = DEFAULT_GRID) -> float:
     """Largest distance (leaf lengths) between the surface and the piecewise-bilinear surface
     through the ``coarse`` grid, sampled at the ``fine`` grid: how far the drawn outline can
-    move when a leaf drops to ``coarse``."""
+    move when a leaf drops to ``coarse``. The surface is the drawn one
+    (:func:`leafview.botany.leaf_surface.evaluate`: a lobed leaf's sweep at the grids given, which
+    for a lobed leaf should be lobed grids)."""
     uv = grid_uv(*fine).astype(np.float64)
-    veins = shape_grid(params)
-    ref = evaluate(params, uv[:, 0], uv[:, 1], vein_grid=veins)
+    ref = leaf_surface.evaluate(params, uv[:, 0], uv[:, 1])
     cu, cv = coarse
-    g = evaluate(params, *grid_uv(cu, cv).astype(np.float64).T, vein_grid=veins).reshape(cv, cu, 3)
+    g = leaf_surface.evaluate(params, *grid_uv(cu, cv).astype(np.float64).T).reshape(cv, cu, 3)
     x = (uv[:, 0] + 1.0) / 2.0 * (cu - 1)
     y = uv[:, 1] * (cv - 1)
     i = np.minimum(x.astype(int), cu - 2)
@@ -228,17 +283,40 @@ def _lod_error(params: Any, coarse: tuple[int, int], fine: tuple[int, int] = DEF
 
 
 def species_cull(scene: Scene, grids: Sequence[tuple[int, int]] = LOD_GRIDS) -> NDArray[Any]:
-    """SPECIES_CULL_BLOCK rows, the numpy reference: every species evaluated at every level's
-    grid as drawn (:func:`leafview.deform.surface.evaluate` at
-    :func:`~leafview.deform.surface.drawn_uv`, with the species' vein grid), then
-    :func:`cull_rows_from_points`.
+    """SPECIES_CULL_BLOCK rows, the numpy reference: every unlobed species evaluated at every
+    level's grid as drawn (:func:`leafview.deform.surface.evaluate` at
+    :func:`~leafview.deform.surface.drawn_uv`, with the species' vein grid), every lobed one at
+    every grid of :func:`lobed_levels` (:func:`leafview.botany.leaf_surface.evaluate`, its sweep),
+    then :func:`cull_rows_from_points`, each kind on its own grids.
+
+    A lobed species' row: no variation (its leaves keep its shape), ``lod_error[0]`` its grid group
+    (1) and :data:`LOD_NEVER` at the levels beyond its own.
     :class:`SceneRenderer` computes the same rows on the GPU (:mod:`leafview.gpu.bounds`)."""
     if len(grids) > 4:
         raise ValueError("at most 4 levels of detail")
-    veins = [shape_grid(sp) for sp in scene.species]
-    points = [np.stack([evaluate(sp, *drawn_uv(sp, grid_uv(*g)).T, vein_grid=vg) for sp, vg in zip(scene.species, veins)])
-              for g in grids]
-    return cull_rows_from_points(points, grids, scene.spec.variation)
+    lobed = lobed_species(scene)
+    out = np.zeros(len(scene.species), SPECIES_CULL_BLOCK.dtype)
+    plain = [sp for sp, lb in zip(scene.species, lobed) if not lb]
+    if plain:
+        veins = [shape_grid(sp) for sp in plain]
+        points = [np.stack([evaluate(sp, *drawn_uv(sp, grid_uv(*g)).T, vein_grid=vg) for sp, vg in zip(plain, veins)])
+                  for g in grids]
+        out[~lobed] = cull_rows_from_points(points, grids, scene.spec.variation)
+    if lobed.any():
+        lgrids = lobed_levels(grids)
+        swept = [sp for sp, lb in zip(scene.species, lobed) if lb]
+        points = [np.stack([leaf_surface.evaluate(sp, *grid_uv(*g).astype(np.float64).T) for sp in swept])
+                  for g in lgrids]
+        out[lobed] = mark_lobed(cull_rows_from_points(points, lgrids, 0.0), len(lgrids))
+    return out
+
+
+def mark_lobed(rows: NDArray[Any], levels: int) -> NDArray[Any]:
+    """Culling ``rows`` of lobed species made theirs: grid group 1 in ``lod_error[0]`` and
+    :data:`LOD_NEVER` at levels ``levels`` and up (in place; returned)."""
+    rows["lod_error"][:, 0] = LOBED_GROUP
+    rows["lod_error"][:, levels:] = LOD_NEVER
+    return rows
 
 
 def cull_rows_from_points(points: Sequence[NDArray[Any]], grids: Sequence[tuple[int, int]],
@@ -325,21 +403,27 @@ class CullSettings:
 
 
 def cull_reference(scene: Scene, cull_rows: NDArray[Any], camera: Camera, size: tuple[int, int],
-                   settings: CullSettings = CullSettings(), levels: int = len(LOD_GRIDS)
-                   ) -> NDArray[np.int32]:
-    """The level each leaf gets (-1: culled), computed in numpy exactly as ``scene_cull.comp``."""
+                   settings: CullSettings = CullSettings(), levels: int = len(LOD_GRIDS),
+                   lobed: int | None = None) -> NDArray[np.int32]:
+    """The level each leaf gets (-1: culled), computed in numpy exactly as ``scene_cull.comp``:
+    among ``levels`` levels for a species of grid group 0, ``lobed`` for a lobed one (default: the
+    levels of :func:`lobed_levels` of the first ``levels`` :data:`LOD_GRIDS`; a forced level is
+    clamped to the group's last)."""
     m = scene.matrices
     sc = cull_rows[scene.species_id]
+    if lobed is None:
+        lobed = len(lobed_levels(LOD_GRIDS[:levels]))
+    own = np.where(sc["lod_error"][:, 0] >= LOBED_GROUP, lobed, levels)
     center = np.einsum("nij,nj->ni", m[:, :3, :3], sc["sphere"][:, :3]) + m[:, :3, 3]
     scale = np.linalg.norm(m[:, :3, 0], axis=1)
     radius = sc["sphere"][:, 3] * scale
     ppu = np.full(len(scene), _pixel_scale(camera, size))
     if camera.perspective:
         ppu = ppu / np.maximum(np.linalg.norm(center - camera.eye[:3], axis=1) - radius, 1e-4)
-    level = np.full(len(scene), max(settings.forced_level, 0), np.int32)
+    level = np.minimum(max(settings.forced_level, 0), own - 1).astype(np.int32)
     if settings.forced_level < 0:
-        for k in range(1, levels):
-            ok = (level == k - 1) & (sc["lod_error"][:, k] * scale * ppu <= settings.max_error_px)
+        for k in range(1, max(levels, lobed)):
+            ok = (level == k - 1) & (k < own) & (sc["lod_error"][:, k] * scale * ppu <= settings.max_error_px)
             level[ok] = k
     if settings.cull:
         planes = frustum_planes(camera.proj @ camera.view)
@@ -367,7 +451,7 @@ class _SceneBatch:
                                 if needs_row_texture(owner.species_records) else None)
             self.species_of = self._objects.own(
                 ctx.buffer(owner.scene.species_id[start:stop].astype(np.uint32).tobytes()))
-            levels = len(owner.grids)
+            levels = len(owner.command_grids)
             self.visible = self._objects.own(ctx.buffer(reserve=4 * self.count * levels))
             self.vertices = self._objects.own(ctx.buffer(reserve=LEAF_VERTEX_BLOCK.nbytes * self.count))
             self.reset = np.zeros(levels, DRAW_COMMAND_DTYPE)
@@ -408,6 +492,9 @@ class SceneRenderer:
         vein field is built). :attr:`show_veins` turns them off and on again per frame (the
         viewer's checkbox), drawing a ``LEAF_NO_VEINS`` program variant while off.
 
+    Lobed species are drawn on :attr:`lobed_grids` (empty without one), whose draw commands follow
+    the levels' in every batch: :attr:`command_grids` is the grid of each command.
+
     Raises :class:`SceneLimitError` when the rows cannot fit the context's limits; checks
     ``ctx.error`` after allocating so an out-of-memory is reported, not ignored.
     """
@@ -444,7 +531,13 @@ class SceneRenderer:
             self.veins = self._objects.own(VeinDraw(ctx, self.resources.programs))
             self.show_veins = veins   # False: draws without veins (a LEAF_NO_VEINS variant), fields kept
             layers = self.veins.update(scene.species, enabled=veins)
-            self.species_records, table, keys = species_tables(scene, layers)
+            # the lobed species' sweep tables, one array texture for the whole scene
+            self.lobes = self._objects.own(LobeTables(ctx))
+            lobe_layers = self.lobes.update(scene.species)
+            self.lobed = lobe_layers >= 0
+            self.lobed_grids: tuple[tuple[int, int], ...] = lobed_levels(self.grids) if self.lobed.any() else ()
+            self.command_grids = self.grids + self.lobed_grids
+            self.species_records, table, keys = species_tables(scene, layers, lobe_layers)
             self.program = self.resources.leaf_program({"LEAF_INDIRECT": 1, **self._defines()})
             self.cull = self.resources.programs.compute("scene_cull.comp")
             self.compact = self.resources.programs.compute("scene_compact.comp")
@@ -460,7 +553,7 @@ class SceneRenderer:
             self.base_vertex: list[int] = []
             self.index_counts: list[int] = []
             nverts = nidx = 0
-            for nu, nv in self.grids:
+            for nu, nv in self.command_grids:
                 tri = grid_indices(nu, nv).ravel()
                 self.first_index.append(nidx)
                 self.base_vertex.append(nverts)
@@ -495,14 +588,26 @@ class SceneRenderer:
         level's grid with the vertex shader's code; a record costs microseconds there, less than
         finding duplicates would)."""
         self._bind_tables()
-        bounds = LeafBounds(self.ctx, self.resources.programs, self.resources.prepare, self.grids)
-        return bounds.run(records, self.scene.spec.variation, {**feature_defines(records), **vein_defines(records)},
-                          block_limit=self._block_limit)
+        out = np.zeros(len(records), SPECIES_CULL_BLOCK.dtype)
+        for lobed in (False, True):
+            mine = self.lobed == lobed
+            if not mine.any():
+                continue
+            recs = records[mine] if lobed or self.lobed.any() else records
+            grids = self.lobed_grids if lobed else self.grids
+            bounds = LeafBounds(self.ctx, self.resources.programs, self.resources.prepare, grids)
+            # a lobed species' shape does not vary (pack_scene): its sphere and errors are its own
+            rows = bounds.run(recs, 0.0 if lobed else self.scene.spec.variation,
+                              {**feature_defines(recs), **vein_defines(recs), **lobe_defines(recs)},
+                              block_limit=self._block_limit)
+            out[mine] = mark_lobed(rows, len(grids)) if lobed else rows
+        return out
 
     def _defines(self) -> dict[str, int]:
-        """The feature defines of this scene's leaf programs (vertex branches, textures, veins)."""
+        """The feature defines of this scene's leaf programs (vertex branches, textures, veins, and
+        ``LEAF_NO_LOBES`` without a lobed species)."""
         recs = self.species_records
-        return {**feature_defines(recs), **texture_defines(recs), **vein_defines(recs)}
+        return {**feature_defines(recs), **texture_defines(recs), **vein_defines(recs), **lobe_defines(recs)}
 
     def _make_stems(self, stems: Any) -> moderngl.VertexArray | None:
         if stems is None or len(stems[2]) == 0:
@@ -570,7 +675,8 @@ class SceneRenderer:
         s["pixel_scale"] = _pixel_scale(cam, self.size)
         s["min_pixels"] = settings.min_pixels
         s["max_error_px"] = settings.max_error_px
-        s["levels"] = len(self.grids)
+        s["group_levels"] = (len(self.grids), len(self.lobed_grids))
+        s["group_first"] = (0, len(self.grids))
         s["forced_level"] = settings.forced_level
         s["frustum"] = settings.cull
         self.species_ssbo.bind_to_storage_buffer(SPECIES_BINDING)
@@ -585,7 +691,8 @@ class SceneRenderer:
         batch.visible.bind_to_storage_buffer(VISIBLE_BINDING)
         s.run(group_x=-(-batch.count // _LOCAL))
         self.ctx.memory_barrier(moderngl.SHADER_STORAGE_BARRIER_BIT)
-        self._compact(batch.rows, batch.commands, batch.visible, batch.vertices, batch.count, len(self.grids))
+        self._compact(batch.rows, batch.commands, batch.visible, batch.vertices, batch.count,
+                      len(self.command_grids))
 
     def _compact(self, rows: moderngl.Buffer, commands: moderngl.Buffer, visible: moderngl.Buffer,
                  vertices: moderngl.Buffer, stride: int, levels: int) -> None:
@@ -609,6 +716,7 @@ class SceneRenderer:
         self.ripples.bind()
         self.textures.use()
         self.veins.use()
+        self.lobes.use()
 
     def draw(self, settings: CullSettings = CullSettings(), *, defines: Mapping[str, object] | None = None) -> None:
         """Cull and draw every batch (and the stems) into the bound framebuffer. A context
@@ -620,9 +728,12 @@ class SceneRenderer:
 
         Veined scenes draw their finest level with the vein field and the coarser levels (leaves
         too small on screen for their veins) with the ``LEAF_VEIN_SKIN`` variant, two indirect
-        draws a batch; with :attr:`show_veins` off, the ``LEAF_NO_VEINS`` variant, one."""
+        draws a batch; with :attr:`show_veins` off, the ``LEAF_NO_VEINS`` variant, one. Lobed
+        leaves (no veins) are drawn by the same multi-draws: their commands follow the levels'
+        (in the second draw of a veined scene)."""
         ensure_alive(self.ctx, "drawing a scene")
         levels = len(self.grids)
+        commands = len(self.command_grids)
         far: tuple[moderngl.Program, list[moderngl.VertexArray], Any] | None = None
         if self.veins.active and not self.show_veins:
             defines = {**(defines or {}), **NO_VEIN_DEFINES}
@@ -644,45 +755,62 @@ class SceneRenderer:
                 if isinstance(offset, moderngl.Uniform):
                     offset.value = batch.start
             if far is None:
-                vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=levels)
+                vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=commands)
             else:
                 vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=1)
-                far[1][i].render_indirect(batch.commands, moderngl.TRIANGLES, count=levels - 1, first=1)
+                far[1][i].render_indirect(batch.commands, moderngl.TRIANGLES, count=commands - 1, first=1)
 
     def level_counts(self) -> NDArray[np.int64]:
-        """Leaves drawn at each level in the last :meth:`draw` (reads the commands back)."""
+        """Leaves drawn by each draw command in the last :meth:`draw` (reads the commands back):
+        the levels of :attr:`grids`, then those of :attr:`lobed_grids` (:attr:`command_grids`)."""
         ensure_alive(self.ctx, "reading the draw commands back")
-        total = np.zeros(len(self.grids), np.int64)
+        total = np.zeros(len(self.command_grids), np.int64)
         for batch in self.batches:
             total += np.frombuffer(batch.commands.read(), DRAW_COMMAND_DTYPE)["instance_count"]
         return total
 
     def levels(self) -> NDArray[np.int32]:
-        """Each leaf's level in the last :meth:`draw` (-1: culled), read back from the lists."""
+        """Each leaf's level in the last :meth:`draw` (-1: culled), read back from the lists: of
+        :attr:`grids`, or of :attr:`lobed_grids` for a lobed leaf (as :func:`cull_reference`)."""
         ensure_alive(self.ctx, "reading the visible lists back")
         out = np.full(len(self.scene), -1, np.int32)
         for batch in self.batches:
             counts = np.frombuffer(batch.commands.read(), DRAW_COMMAND_DTYPE)["instance_count"]
             vis = np.frombuffer(batch.visible.read(), np.uint32)
             for k, c in enumerate(counts):
-                out[batch.start + vis[k * batch.count:k * batch.count + int(c)]] = k
+                level = k if k < len(self.grids) else k - len(self.grids)
+                out[batch.start + vis[k * batch.count:k * batch.count + int(c)]] = level
         return out
 
     def triangles(self, counts: NDArray[np.int64] | None = None) -> int:
         """Leaf triangles drawn in the last :meth:`draw`, from ``counts`` (as
-        :meth:`level_counts` returned them) or read back."""
-        per = np.array([2 * (nu - 1) * (nv - 1) for nu, nv in self.grids])
-        return int((self.level_counts() if counts is None else counts) @ per)
+        :meth:`level_counts` returned them; counts of only the first commands, e.g. of the
+        levels of :attr:`grids`, count those) or read back."""
+        counts = self.level_counts() if counts is None else np.asarray(counts)
+        per = np.array([2 * (nu - 1) * (nv - 1) for nu, nv in self.command_grids[:len(counts)]])
+        return int(counts @ per)
+
+    def capture_grid(self, leaves: Sequence[int] | NDArray[np.integer[Any]], level: int = 0) -> tuple[int, int]:
+        """The grid :meth:`capture` evaluates ``leaves`` on at ``level``: ``grids[level]``, or for
+        lobed leaves ``lobed_grids[level]`` (their last level at most, as the culling pass clamps
+        a forced level). Raises ValueError when ``leaves`` mix lobed and unlobed species."""
+        picks = np.asarray(list(leaves), dtype=np.int64).reshape(-1)
+        kinds = set(self.lobed[self.scene.species_id[picks]].tolist()) if picks.size else {False}
+        if len(kinds) > 1:
+            raise ValueError("leaves: lobed and unlobed leaves are drawn on different grids; capture them apart")
+        if kinds == {True}:
+            return self.lobed_grids[min(int(level), len(self.lobed_grids) - 1)]
+        return self.grids[level]
 
     def capture(self, leaves: Sequence[int], level: int = 0) -> NDArray[np.float32]:
         """Leaf-space positions that ``leaf.vert`` computes for the given leaves at ``level``'s
-        grid (transform feedback of the drawing program reading the vertex records that
-        ``scene_compact.comp`` writes, one instanced capture per batch):
-        (len(leaves), nu·nv, 3). The framebuffer binding is left as it was."""
+        grid (:meth:`capture_grid`: lobed leaves on their own) (transform feedback of the drawing
+        program reading the vertex records that ``scene_compact.comp`` writes, one instanced
+        capture per batch): (len(leaves), nu·nv, 3). The framebuffer binding is left as it was."""
         picks = np.asarray(list(leaves), dtype=np.int64).reshape(-1)
         if picks.size and (picks.min() < 0 or picks.max() >= len(self.scene)):
             raise IndexError(f"leaf index out of range 0..{len(self.scene) - 1}")
-        grid = self.resources.grid(*self.grids[level])
+        grid = self.resources.grid(*self.capture_grid(picks, level))
         nverts = grid.vertices
         order: list[NDArray[np.int64]] = []
         self._bind_tables()
@@ -760,18 +888,19 @@ def lod_switch_error(ctx: moderngl.Context, presets: Sequence[str], settings: Cu
                      grids: Sequence[tuple[int, int]] = LOD_GRIDS) -> float:
     """Largest outline change, in pixels, when a leaf switches level: each preset's leaf is drawn
     top-down at the exact size where the culling pass switches it from level k to k + 1, once at
-    each level (no MSAA), and the Hausdorff distance between the two coverage masks is taken."""
+    each level (no MSAA), and the Hausdorff distance between the two coverage masks is taken
+    (a lobed preset among its own levels, :func:`lobed_levels`)."""
     worst = 0.0
     for name in presets:
         params = LeafParams.load(resolve_preset(name))
         scene = single_leaf_scene(params)
         with SceneRenderer(ctx, scene, grids=grids) as r:
-            for k in range(1, len(grids)):
+            pts = leaf_surface.grid_points(params, DEFAULT_GRID)
+            for k in range(1, len(r.lobed_grids if r.lobed[0] else grids)):
                 err = float(r.cull_rows[0]["lod_error"][k])
                 if err <= 0:
                     continue
                 ppu = settings.max_error_px / err * (1.0 + 1e-6)   # pixels per leaf length at the switch
-                pts = evaluate(params, *grid_uv(*DEFAULT_GRID).astype(np.float64).T)
                 lo, hi = pts.min(axis=0), pts.max(axis=0)
                 w, h = (int(np.ceil((hi[i] - lo[i]) * ppu)) + 8 for i in (0, 1))
                 if max(w, h) > 4096:

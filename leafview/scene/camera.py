@@ -36,6 +36,7 @@ import numpy as np
 import pyrr
 from numpy.typing import ArrayLike, NDArray
 
+from leafview.botany import leaf_surface
 from leafview.core.limits import MIN_FRAME_RATIO
 from leafview.core.params import LeafParams, ParamError
 from leafview.deform.surface import evaluate, grid_uv
@@ -202,10 +203,14 @@ def check_framable(points: ArrayLike, what: str = "the geometry", path: str = "t
 def check_leaf_framable(leaf: LeafParams, label: str | None = None) -> None:
     """:func:`check_framable` on a coarse grid of ``leaf`` placed by its transform, naming the leaf
     (``label``, default its name) and the field (``transform``, or ``shape`` when the leaf-space
-    geometry itself is not finite)."""
+    geometry itself is not finite). A lobed leaf is checked on its swept surface
+    (:func:`leafview.botany.leaf_surface.grid_points`, the lobed grid drawn for 5 × 9), not on Ω."""
     what = f"leaf {label or leaf.name or '(unnamed)'}"
-    uv = grid_uv(5, 9).astype(np.float64)
-    local = evaluate(leaf, uv[:, 0], uv[:, 1])
+    if leaf.lobes.enabled:
+        local = leaf_surface.grid_points(leaf, (5, 9))
+    else:
+        uv = grid_uv(5, 9).astype(np.float64)
+        local = evaluate(leaf, uv[:, 0], uv[:, 1])
     if not np.isfinite(local).all():
         raise ParamError("shape", f"{what}: its surface is not finite; it cannot be drawn")
     m = leaf.transform.matrix()

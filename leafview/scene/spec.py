@@ -12,6 +12,9 @@ Variation within a species (Garg & Leow 2011, sec. 4 uses up to ±20 %): every l
 ``f ∈ [1 - variation, 1 + variation]``, one per Ω component (:data:`VARIED`), multiplying the
 species' value; ``v̄`` positions stay inside (0, 1). The leaf colour is multiplied by
 ``1 ± colour_variation`` (one factor per leaf). Each plant takes one species, drawn by weight.
+A lobed species (``LeafParams.lobes`` with an outline) is drawn from its sweep table, not from Ω:
+its leaves vary in placement and colour only (their factors are 1; the table, cup included, is
+shared by the species, one GPU layer each, so varying it per leaf would cost a table per leaf).
 
 Bending in scenes: the cantilever solve (Geng, Hu & Zhang 2014, eq. 4) runs once per species, in the species'
 own rest frame, and every leaf of that species carries that droop (a per-leaf solve costs about a
@@ -35,6 +38,7 @@ import tomli_w
 from numpy.typing import NDArray
 
 from leafview.atomic import write_text
+from leafview.botany import leaf_surface
 from leafview.botany.vein_shape import shape_grid
 from leafview.core.compact import compact_dict, parse_compact
 from leafview.core.display import png_of
@@ -58,7 +62,7 @@ from leafview.core.params import (
     transform_matrices,
 )
 from leafview.deform.beam import bend_profile
-from leafview.deform.surface import evaluate, grid_uv, partials
+from leafview.deform.surface import grid_uv, partials
 from leafview.resources import builtin_presets
 from leafview.scene.plants import LEAVES_PER_PLANT, Placement, PlantSpec, scatter
 
@@ -391,8 +395,9 @@ class Scene:
         t = float(self.tint[i])
         mat = sp.material
         mat = replace(mat, front=_tinted(mat.front, t), back=_tinted(mat.back, t))
-        return sp.replace(shape=vary_shape(sp.shape, self.factors[i]), material=mat,
-                          name=f"{sp.name or 'leaf'}_{i}")
+        # a lobed leaf's Ω is not its shape (its sweep table is): it keeps its species' (build_scene)
+        shape = sp.shape if sp.lobes.enabled else vary_shape(sp.shape, self.factors[i])
+        return sp.replace(shape=shape, material=mat, name=f"{sp.name or 'leaf'}_{i}")
 
     def placed_leaf(self, i: int) -> LeafParams:
         """Leaf ``i`` as a stand-alone leaf: :meth:`leaf` with ``matrices[i]`` as its transform and
@@ -448,6 +453,12 @@ def build_scene(spec: SceneSpec) -> Scene:
             f *= spec.variation
             f += 1.0
             factors[start:start + len(f)] = f
+        # a lobed species' leaves vary in transform and colour only: its Ω factors would change
+        # nothing it draws (its shape is its sweep table), so they stay 1 (drawn all the same, so
+        # that the other species' leaves keep their numbers)
+        lobed = np.array([bool(s.lobes.enabled) for s in spec.species], bool)
+        if lobed.any():
+            factors[lobed[species_id]] = 1.0
     tint = np.ones(n, np.float32)
     if spec.colour_variation > 0:
         tint = (1.0 + spec.colour_variation * rng.uniform(-1.0, 1.0, n)).astype(np.float32)
@@ -489,10 +500,13 @@ def _unplaced(leaf: LeafParams, identity: Transform) -> LeafParams:
 def evaluate_leaf(scene: Scene, i: int, u: NDArray[np.floating], v: NDArray[np.floating]) -> NDArray[np.float64]:
     """Leaf-space points of leaf ``i`` as the scene draws it: its own shape, jitter and ripples,
     bent by its species' cantilever profile and shaped by its species' vein grid (the numpy
-    reference of the GPU rows)."""
+    reference of the GPU rows). A lobed leaf: its swept surface
+    (:func:`leafview.botany.leaf_surface.evaluate`, ``u, v`` on its lobed grid)."""
 
     own = scene.leaf(int(i))
     sp = scene.species[int(scene.species_id[i])]
+    if sp.lobes.enabled:
+        return leaf_surface.evaluate(own, u, v)
     grid = shape_grid(sp)   # every leaf of a species reads its species' vein grid (one field layer each)
     if not own.bending.active:
         return partials(own, u, v, vein_grid=grid).L
@@ -507,7 +521,7 @@ def bend_deviation(scene: Scene, sample: Sequence[int]) -> float:
     worst = 0.0
     for i in sample:
         own = scene.leaf(int(i))
-        if own.bending.active:
+        if own.bending.active and not own.lobes.enabled:   # the bend of a swept surface is not drawn
             drawn = evaluate_leaf(scene, int(i), uv[:, 0], uv[:, 1])
-            worst = max(worst, float(np.abs(evaluate(own, uv[:, 0], uv[:, 1]) - drawn).max()))
+            worst = max(worst, float(np.abs(leaf_surface.evaluate(own, uv[:, 0], uv[:, 1]) - drawn).max()))
     return worst
