@@ -88,7 +88,7 @@ class SceneView:
         self._dts: deque[float] = deque(maxlen=30)
         self._drag: str | None = None
         self._render_target: RenderTarget | None = None
-        self.counts = np.zeros(len(self.renderer.grids), np.int64)
+        self.counts = np.zeros(len(self.renderer.command_grids), np.int64)   # lobed levels after the others
 
     def _corners(self) -> NDArray[np.float64]:
         lo, hi = self.scene.bounds()
@@ -184,8 +184,9 @@ class SceneView:
         imgui.separator()
         total = int(self.counts.sum())
         imgui.text(f"drawn: {total:,} of {len(self.scene):,}")
-        for (nu, nv), c in zip(self.renderer.grids, self.counts):
-            imgui.text(f"  {nu}×{nv} grid: {int(c):,}")
+        lobed = len(self.renderer.grids)
+        for k, ((nu, nv), c) in enumerate(zip(self.renderer.command_grids, self.counts)):
+            imgui.text(f"  {nu}×{nv} grid{' (lobed)' if k >= lobed else ''}: {int(c):,}")
         imgui.text(f"triangles: {self.renderer.triangles(self.counts):,}")
         imgui.end()
 

@@ -181,7 +181,9 @@ SPECIES_CULL_BLOCK = Block(
     "SpeciesCull", "SpeciesCullBlock",
     (
         ("sphere", "vec4", 1),     # leaf-space bounding sphere of the species' leaves: centre, radius
-        ("lod_error", "vec4", 1),  # outline error (leaf lengths) of level k's grid vs the surface; [0] = 0
+        # outline error (leaf lengths) of level k's grid vs the surface, k >= 1; [0] the species'
+        # grid group (0 the level grids, 1 the lobed grids: leafview.gpu.scene.mark_lobed)
+        ("lod_error", "vec4", 1),
     ),
     "one species of a scene: what the culling pass needs (leafview/gpu/scene.py)",
 )
