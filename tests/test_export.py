@@ -72,7 +72,14 @@ def test_baked_triangles_have_area_and_unit_normals(presets):
         assert (t[:, 0] != t[:, 1]).all() and (t[:, 1] != t[:, 2]).all() and (t[:, 0] != t[:, 2]).all()
         p = mesh.positions.astype(np.float64)
         area = 0.5 * np.linalg.norm(np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]]), axis=1)
-        assert area.min() > 1e-9, name
+        if params.lobes.enabled:
+            # a lobed leaf's welded grid keeps the collinear triangles where a tie runs on past a
+            # skeleton tip (leafview.botany.lobe_sweep.weld_grid: dropping them would slit the
+            # sheet): a few slivers, no coincident corners
+            assert (area <= 1e-9).mean() < 0.01, name
+            assert len(np.unique(mesh.positions, axis=0)) == mesh.n_vertices, name
+        else:
+            assert area.min() > 1e-9, name
         assert np.abs(np.linalg.norm(mesh.normals, axis=1) - 1).max() < 1e-6, name
         # vertex normals agree with the counter-clockwise winding (front = +z side)
         face = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])

@@ -31,7 +31,9 @@ ground as the compound leaf drawn part by part.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import shapely
@@ -40,13 +42,14 @@ from shapely.geometry import LinearRing, LineString, Polygon
 from shapely.geometry.polygon import orient
 from shapely.ops import unary_union
 
-from leafview.botany.lobes import LobedLeaf, LobePlacement, ShapeSource, lobe_outlines
+from leafview.botany.lobes import LobedLeaf, LobePlacement, ShapeSource, lobe_outlines, lobed_from_dict
 from leafview.core.bspline import MAX_CONTROLS, basis, fit_closed, sample_closed, signed_area
+from leafview.core.io import register_document_reader
 from leafview.core.lobes import Lobes
 from leafview.core.params import LeafParams
 from leafview.errors import ParamError
 
-__all__ = ["HAUSDORFF_GOAL", "BLEND", "CORNER_ANGLE", "USER_VALLEY_OFF", "VALLEY_REACH", "LobedMargin",
+__all__ = ["compound_document", "HAUSDORFF_GOAL", "BLEND", "CORNER_ANGLE", "USER_VALLEY_OFF", "VALLEY_REACH", "LobedMargin",
            "parts_union", "lobed_margin", "lobed_outline", "lobed_outline_params", "margin_params", "hausdorff"]
 
 HAUSDORFF_GOAL = 0.005   # fitted margin vs the union, in units of the leaf length (y-extent)
@@ -570,3 +573,16 @@ def lobed_outline_params(leaf: LobedLeaf, *, controls: int = 96, shape_source: S
     """A lobed :class:`LeafParams`: ``lobes`` with the margin and its valleys, the compound
     spec's material and name; everything else at its default."""
     return margin_params(leaf, lobed_margin(leaf, controls=controls, shape_source=shape_source, grow=grow))
+
+
+def compound_document(data: Any) -> LeafParams | None:
+    """The lobed leaf of a parsed compound file (``lobed = 1``: Garg & Leow's lobes, eqs 7-9,
+    joined into one margin by :func:`lobed_outline_params`), or None for any other document.
+    Registered with :func:`leafview.core.io.register_document_reader` when this module is
+    imported, so compound files load wherever leaf files do."""
+    if not (isinstance(data, Mapping) and "lobed" in data):
+        return None
+    return lobed_outline_params(lobed_from_dict(data))
+
+
+register_document_reader(compound_document)

@@ -4,6 +4,10 @@ checks and reporting.
 Argument types raise :class:`argparse.ArgumentTypeError` (argparse prints the message and exits
 2); the other helpers raise :class:`~leafview.errors.UsageError`, which :func:`leafview.cli.main`
 reports with exit code 2 before anything is written.
+
+Compound leaf files (``lobed = 1``, ``assets/compound/*.toml``) load wherever a leaf file does:
+importing this module imports :mod:`leafview.botany.lobe_outline`, which registers their reader
+with :mod:`leafview.core.io`.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from typing import Any
 from tqdm import tqdm
 
 from leafview.atomic import UniqueNames, check_folder, check_target
+from leafview.botany import lobe_outline as _compound_files  # noqa: F401  (registers the compound-file reader)
 from leafview.core.io import load_leaves
 from leafview.core.limits import MAX_GRID, MAX_IMAGE_SIDE, parse_count
 from leafview.core.params import LeafParams
@@ -134,7 +139,8 @@ def preset_file(spec: str) -> Path:
 
 def load_leaf_files(paths: Sequence[Path]) -> list[LeafParams]:
     """Every leaf of the given files, in order: a leaf set (``*.leaves.json``) gives all of its
-    leaves, any other preset file one. Each leaf is named (its file's stem when unnamed)."""
+    leaves, any other preset file (a compound ``lobed = 1`` file too) one. Each leaf is named
+    (its file's stem when unnamed)."""
     return [leaf for path in paths for leaf in load_leaves(path)]
 
 

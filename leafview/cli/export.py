@@ -11,7 +11,9 @@ whole scene into ``-o FILE``.
 
 ``--mesh cdt`` exports presets as venation meshes instead of the (u, v) grid: a constrained
 Delaunay triangulation with the veins of order <= 2 as edges (:mod:`leafview.export.cdt`;
-``--max-area``, ``--min-angle``). Either mesh of a preset with its venation enabled carries the
+``--max-area``, ``--min-angle``); a lobed leaf is refused (exit 2): it is exported on its own welded
+grid (:mod:`leafview.export.mesh`). A compound (``lobed = 1``) file is accepted wherever a preset
+is (:func:`leafview.cli.args.load_leaf_files`). Either mesh of a preset with its venation enabled carries the
 leaf's baked vein textures (:mod:`leafview.export.vein_maps`: base colour and normal maps of both
 sides, a photograph staying the base colour); ``--veins off`` leaves them out (the file is then
 the one of a leaf without venation). Scene files and leaf sets into one file carry none.
@@ -51,7 +53,14 @@ from leafview.export import (
     format_of,
     write,
 )
-from leafview.export.cdt import DEFAULT_MAX_AREA, DEFAULT_MIN_ANGLE, bake_cdt, check_max_area, check_min_angle
+from leafview.export.cdt import (
+    DEFAULT_MAX_AREA,
+    DEFAULT_MIN_ANGLE,
+    bake_cdt,
+    check_max_area,
+    check_min_angle,
+    check_not_lobed,
+)
 from leafview.export.gltf import BACK_FACES, INSTANCING_MODES
 from leafview.export.mesh import BACKENDS, DEFAULT_RESOLUTION, check_resolution
 from leafview.export.objply import UP_AXES
@@ -332,7 +341,10 @@ def _run_scene(args: argparse.Namespace, path: Path, started: float,
 
 
 def _run_cdt(args: argparse.Namespace, paths: list[Path], leaves: list[LeafParams], started: float) -> int:
-    """``--mesh cdt``: each leaf's venation mesh and vein textures, one file each."""
+    """``--mesh cdt``: each leaf's venation mesh and vein textures, one file each (a lobed leaf is
+    refused, naming ``--mesh``)."""
+    for leaf in leaves:
+        check_not_lobed(leaf)
     if len(paths) == 1 and len(leaves) > 1 and Path(args.output).suffix.lower() in FORMATS:
         raise UsageError(f"{paths[0]} is a leaf set: --mesh cdt writes one leaf a file (use -o DIR)")
     mode, out, fmt = _target(args, len(leaves))

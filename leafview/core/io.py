@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +22,7 @@ from leafview.core.params import LeafParams, ParamError, parse_params, register_
 from leafview.core.texture import with_folder
 from leafview.inputs import parse_json, parse_toml, read_text
 
-__all__ = ["load_params", "save_params", "dumps_toml", "read_document", "load_leaves", "save_leaves",
+__all__ = ["register_document_reader", "load_params", "save_params", "dumps_toml", "read_document", "load_leaves", "save_leaves",
            "leaves_from_document", "is_compact_path"]
 
 _FORMATS = {".toml": "toml", ".json": "json"}
@@ -76,11 +77,33 @@ def _is_leaf_set(data: Any) -> bool:
     return compact.is_compact(data) and "leaves" in data
 
 
+DocumentReader = Callable[[Any], LeafParams | None]
+_READERS: list[DocumentReader] = []
+
+
+def register_document_reader(reader: DocumentReader) -> None:
+    """Let ``reader`` turn documents of a kind this module does not know into a leaf (it returns
+    None for the others; its ParamErrors name the field). :mod:`leafview.botany.lobe_outline`
+    registers the compound lobed-leaf files (``lobed = 1``) when it is imported, which every
+    command line tool does."""
+    if reader not in _READERS:
+        _READERS.append(reader)
+
+
 def leaves_from_document(data: Any, path: str | os.PathLike[str]) -> list[LeafParams]:
-    """The validated leaves of a parsed leaf file (full, compact or leaf set) read from ``path``
-    (named in errors; its stem names unnamed leaves: ``<stem>``, or ``<stem>-<i>`` in a set)."""
+    """The validated leaves of a parsed leaf file (full, compact, leaf set, or a kind a registered
+    reader knows) read from ``path`` (named in errors; its stem names unnamed leaves: ``<stem>``,
+    or ``<stem>-<i>`` in a set)."""
     p = Path(path)
     try:
+        for reader in _READERS:
+            leaf = reader(data)
+            if leaf is not None:
+                return [_in_folder(leaf if leaf.name else leaf.replace(name=_stem(p)), p.parent)]
+        if isinstance(data, Mapping) and "lobed" in data:
+            raise ParamError("lobed", "a compound lobed-leaf file (Garg & Leow's lobes, eqs 7-9): read it with "
+                                      "leafview.botany.lobe_outline (imported by the command line tools), "
+                                      "e.g. lobed_outline_params(load_lobed_leaf(path))")
         if _is_leaf_set(data):
             leaves = compact.parse_leaves(data)
             named = [leaf if leaf.name else leaf.replace(name=f"{_stem(p)}-{i}") for i, leaf in enumerate(leaves)]

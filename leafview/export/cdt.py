@@ -28,6 +28,9 @@ evaluations (:mod:`leafview.export.mesh`): the rendering vertex shader read back
 :func:`leafview.botany.vein_shape.vein_grid` when its venation is on, as the shader samples it),
 so jitter, vein edits, ripples and bending are in the mesh. Texture coordinates are
 :func:`leafview.core.texture.texture_st` of (u, v), as in the grid export.
+
+**Lobed leaves** (``lobes.outline`` set) are refused (:func:`check_not_lobed`, a UsageError
+naming ``--mesh``): they have no venation to constrain and their surface is not Ω over (u, v).
 """
 
 from __future__ import annotations
@@ -62,6 +65,7 @@ __all__ = [
     "CdtQuality",
     "Pslg",
     "bake_cdt",
+    "check_not_lobed",
     "check_max_area",
     "check_min_angle",
     "leaf_plane",
@@ -507,12 +511,21 @@ def _repair_normals(pos: NDArray[np.float64], nrm: NDArray[np.float64], tris: ND
     return nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
 
 
+def check_not_lobed(params: LeafParams) -> None:
+    """Refuse a lobed leaf (``lobes.outline`` set): its surface is the sweep of railroad ties, not
+    Ω over (u, v), and it has no venation to constrain; a UsageError naming ``--mesh``."""
+    if params.lobes.enabled:
+        raise UsageError(f"{params.name or 'leaf'} is a lobed leaf: --mesh cdt meshes the venation of a "
+                         "unilobed leaf; export lobed leaves with --mesh grid (the default)")
+
+
 def bake_cdt(params: LeafParams, *, max_area: float = DEFAULT_MAX_AREA, min_angle: float = DEFAULT_MIN_ANGLE,
              plane: str = "auto", backend: str = "gpu", renderer: LeafRenderer | None = None) -> CdtLeaf:
     """Triangulate ``params`` (:func:`triangulate_leaf`) and evaluate its surface at the
     vertices: a :class:`CdtLeaf` whose mesh the grid export's writers take as it is."""
     if backend not in BACKENDS:
         raise UsageError(f"unknown backend {backend!r} (use {' or '.join(BACKENDS)})")
+    check_not_lobed(params)
     started = time.perf_counter()
     cdt = triangulate_leaf(params, max_area=max_area, min_angle=min_angle, plane=plane)
     pos, nrm = _surface(params, cdt.uv, backend, renderer)

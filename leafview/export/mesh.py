@@ -21,6 +21,20 @@ convention of :func:`leafview.core.texture.texture_st`, stored with the origin a
 as OBJ, PLY and USD expect (s, 1 - t): the leaf's (u, v) rectangle seen from the top view, left
 edge u = +1 (the -x half of a straight leaf), right edge u = -1, base at the bottom, apex at the
 top. glTF counts t downwards and takes ``texture_st`` as it is (:func:`gltf_st`).
+
+Lobed leaves (``params.lobes.enabled``; Mündermann et al. 2003, secs 3.3-4). The shader draws them
+on :func:`leafview.deform.sweep.lobed_grid` of the grid asked for (u along each railroad tie, v
+along the tour of ties); paired ties meet, so the bake evaluates that grid (the shader capture or
+the float64 sweep of :mod:`leafview.botany.leaf_surface`), decides the welding on the float64
+reference (:func:`leafview.botany.lobe_sweep.weld_grid`: grid samples that coincide become one
+vertex, triangles two of whose corners merged are dropped) and keeps, for each welded vertex, the
+position and normal of its first grid sample: one sheet with one boundary loop, the margin. Its
+``uv`` are the texture coordinates the shader shades and samples the image at: the flat leaf's
+position (Mündermann et al. 2003, eq. 1: texture coordinates from the flat position) mapped
+into u in [-1, 1], v in [0, 1] by the margin's bounding box
+(:func:`leafview.deform.sweep.texture_uv`), so ``st`` is
+:func:`~leafview.core.texture.texture_st` of them as for any leaf, in [0, 1]²: the top view of the
+flat leaf, base at the bottom.
 """
 
 from __future__ import annotations
@@ -33,12 +47,15 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from leafview.botany.leaf_surface import sweep_of
+from leafview.botany.lobe_sweep import weld_grid
 from leafview.botany.vein_shape import shape_grid
 from leafview.core.blade import drawn_uv
 from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.params import LeafParams
 from leafview.core.texture import texture_st
 from leafview.deform.surface import grid_indices, grid_uv, tessellate
+from leafview.deform.sweep import lobed_grid
 from leafview.errors import NonFiniteMesh, UsageError
 from leafview.gpu import LeafRenderer, default_renderer
 
@@ -50,6 +67,7 @@ __all__ = [
     "bake",
     "bake_many",
     "check_mesh",
+    "lobed_weld",
     "gltf_st",
     "lower_left_st",
     "pinch_triangles",
@@ -72,7 +90,9 @@ class LeafMesh:
         (V, 2) float32 texture coordinates, origin lower left (:func:`lower_left_st` of ``uv``).
     uv:
         (V, 2) float64, the model's (u, v) of each vertex as drawn (:func:`leafview.core.blade.drawn_uv`:
-        a one-sided leaf's grid spread over its half), for comparisons with the reference.
+        a one-sided leaf's grid spread over its half), for comparisons with the reference; for a
+        lobed leaf its texture coordinates, the flat position in its texture window (see the
+        module docstring).
     indices:
         (T, 3) uint32 triangles, counter-clockwise seen from the front.
     name:
@@ -148,9 +168,14 @@ def _face_normals(pos: NDArray[np.float64], tris: NDArray[np.uint32]) -> NDArray
 def _finish(name: str, uv: NDArray[np.float64], pos: Any, nrm: Any, nu: int, nv: int) -> LeafMesh:
     """Drop the pinch triangles, check and repair, and pack a :class:`LeafMesh`."""
     keep, tris = _topology(nu, nv)
-    uv = uv[keep]
-    pos = np.asarray(pos, dtype=np.float64)[keep]
-    nrm = np.asarray(nrm, dtype=np.float64)[keep]
+    return _pack(name, uv[keep], np.asarray(pos, dtype=np.float64)[keep], np.asarray(nrm, dtype=np.float64)[keep],
+                 tris)
+
+
+def _pack(name: str, uv: NDArray[np.float64], pos: NDArray[np.float64], nrm: NDArray[np.float64],
+          tris: NDArray[np.uint32]) -> LeafMesh:
+    """Check the vertices, repair bad normals from the faces and pack a :class:`LeafMesh`."""
+    nrm = nrm.copy()
     label = name or "leaf"
     bad = ~np.isfinite(pos).all(axis=1)
     if bad.any():
@@ -170,6 +195,36 @@ def _finish(name: str, uv: NDArray[np.float64], pos: Any, nrm: Any, nu: int, nv:
         length = np.linalg.norm(nrm, axis=1)
     nrm = nrm / length[:, None]
     return LeafMesh(pos.astype(np.float32), nrm.astype(np.float32), lower_left_st(uv), uv, tris, name)
+
+
+def lobed_weld(reference: NDArray[np.float64], nu: int, nv: int) -> tuple[NDArray[np.int64], NDArray[np.uint32]]:
+    """The welded mesh of a lobed leaf's (nu × nv) grid (its :func:`~leafview.deform.sweep.lobed_grid`)
+    from the float64 ``reference`` positions (nu·nv, 3): ``(samples, triangles)``, the grid sample
+    each welded vertex takes its position, normal and flat position from (the first of those that
+    coincide, in grid order) and the triangles over those vertices
+    (:func:`leafview.botany.lobe_sweep.weld_grid`). Vertices no triangle uses are dropped."""
+    ref = np.asarray(reference, dtype=np.float64).reshape(-1, 3)
+    verts, faces = weld_grid(ref, nu, nv)
+    first: dict[tuple[float, ...], int] = {}
+    for i, row in enumerate(map(tuple, ref.tolist())):
+        first.setdefault(row, i)                      # weld_grid keeps each group's first sample
+    samples = np.array([first[tuple(p)] for p in verts.tolist()], dtype=np.int64)
+    used = np.unique(faces)
+    remap = np.full(len(samples), -1, dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    return samples[used], remap[faces].astype(np.uint32)
+
+
+def _bake_lobed(params: LeafParams, nu: int, nv: int, backend: str, renderer: LeafRenderer | None) -> LeafMesh:
+    """One lobed leaf on its :func:`~leafview.deform.sweep.lobed_grid` of (nu, nv), welded."""
+    gu, gv = lobed_grid((nu, nv))
+    uv32 = grid_uv(gu, gv)
+    ref = sweep_of(params, uv32.astype(np.float64))
+    samples, tris = lobed_weld(ref.L, gu, gv)
+    pos, nrm = ref.L, ref.normal
+    if renderer is not None and backend == "gpu":
+        pos, nrm = (np.asarray(a, dtype=np.float64) for a in renderer.capture(params, uv32[:, 0], uv32[:, 1]))
+    return _pack(params.name, ref.uv[samples], pos[samples], nrm[samples], tris)
 
 
 def lower_left_st(uv: NDArray[np.float64]) -> NDArray[np.float32]:
@@ -232,6 +287,11 @@ def bake_many(leaves: Iterable[LeafParams], resolution: Sequence[int] = DEFAULT_
         renderer = default_renderer()
     out = []
     for params in leaves:
+        if params.lobes.enabled:
+            out.append(_bake_lobed(params, nu, nv, backend, renderer))
+            if progress is not None:
+                progress(1)
+            continue
         pos: NDArray[np.floating]
         nrm: NDArray[np.floating]
         if renderer is not None and backend == "gpu":   # "gpu" always has a renderer by now

@@ -162,9 +162,10 @@ def _stem(name: str) -> str:
 def bake_vein_maps(params: LeafParams, size: int | None = None) -> VeinMaps | None:
     """The vein textures of ``params`` at ``size`` × ``size`` texels (default :data:`MAPS_SIZE`; a
     multiple of the field's tile, see :func:`leafview.botany.vein_field.check_field_size`); None
-    when its venation is off."""
+    when its venation is off, and for a lobed leaf (``lobes.outline`` set: it is drawn without
+    veins, its texture coordinates are its flat position, not the (u, v) the maps are baked over)."""
     venation = params.venation
-    if not venation.enabled:
+    if not venation.enabled or params.lobes.enabled:
         return None
     size = check_field_size(MAPS_SIZE if size is None else size, "size")
     field = vein_field(params, size).astype(np.float64)
