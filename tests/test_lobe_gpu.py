@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import assert_matches_reference, run_prepare
 from scipy import ndimage
 
 from leafview.botany.lobe_sweep import sweep_table
@@ -37,6 +36,7 @@ from leafview.gpu.sheets import render_leaves
 from leafview.gpu.targets import OffscreenTarget
 from leafview.resources import builtin_presets
 from leafview.scene.camera import frame_view
+from tests.conftest import assert_matches_reference, run_prepare
 
 POS_TOL = 5e-6     # leaf lengths: float32 splines of values of size ~1 (measured: about 1e-7)
 NORMAL_TOL = 2e-4  # away from degenerate ties (see _robust; measured: under 5e-5)
