@@ -78,14 +78,21 @@ def test_defaults_are_left_out_and_presets_are_small():
                                                                          0.5, 0.4, 0, 0.75, 0.25, 0, 0, 0, 0, 0, 0, 0]}
     leaf = LeafParams().replace(jitter=Jitter(enabled=True))
     assert json.loads(C.dumps(leaf))["jitter"] == {"enabled": True}
-    sizes = {k: len(C.dumps(v)) for k, v in _presets().items()}
-    full = {k: len(json.dumps(v.to_dict(), separators=(",", ":"))) for k, v in _presets().items()}
+    presets = {k: v for k, v in _presets().items() if not v.lobes.enabled}
+    sizes = {k: len(C.dumps(v)) for k, v in presets.items()}
+    full = {k: len(json.dumps(v.to_dict(), separators=(",", ":"))) for k, v in presets.items()}
     assert 100 <= sizes["ovate"] <= 200
-    # every preset has a [venation] table (leafview.core.venation): 25-110 bytes of the compact form
-    veinless = {k: len(C.dumps(v.replace(venation=Venation()))) for k, v in _presets().items()}
+    # every unilobed preset has a [venation] table (leafview.core.venation): 25-110 bytes of the compact form
+    veinless = {k: len(C.dumps(v.replace(venation=Venation()))) for k, v in presets.items()}
     assert float(np.median(list(veinless.values()))) <= 200, veinless
     assert all(25 <= sizes[k] - veinless[k] <= 110 for k in sizes), (sizes, veinless)
     assert all(sizes[k] <= 0.6 * full[k] for k in sizes), (sizes, full)
+    # a lobed preset is its margin's control points: about 45 bytes each (two 17-digit numbers)
+    for k, v in _presets().items():
+        if v.lobes.enabled:
+            n = len(v.lobes.outline) + len(v.lobes.valleys)
+            assert len(C.dumps(v)) <= 200 + 48 * n, (k, len(C.dumps(v)), n)
+            assert len(C.dumps(v, digits=6)) <= 200 + 24 * n, (k, len(C.dumps(v, digits=6)), n)
 
 
 def test_rounding_is_idempotent_and_bounded():

@@ -164,11 +164,17 @@ class ViewportInput:
                      "point": point, "normal": normal, "v": along, "frame": v.overlay.frame}
         self.hot = name
 
+    def _drag_hit(self, mx: float, my: float, scene_w: float, h: int) -> np.ndarray | None:
+        """Where the cursor's ray meets the dragged handle's plane (None: parallel to it)."""
+        d = self.drag
+        assert d is not None
+        origin, direction = self.viewer.camera.ray(mx, my, int(round(scene_w)), h)
+        return plane_hit(origin, direction, d["point"], d["normal"])
+
     def _move_handle(self, mx: float, my: float, scene_w: float, h: int) -> None:
         v, d = self.viewer, self.drag
         assert d is not None
-        origin, direction = v.camera.ray(mx, my, int(round(scene_w)), h)
-        hit = plane_hit(origin, direction, d["point"], d["normal"])
+        hit = self._drag_hit(mx, my, scene_w, h)
         if hit is None:
             return
         leaf_point = d["frame"].to_leaf(hit, [d["v"]])[0]
@@ -195,8 +201,7 @@ class ViewportInput:
     def _move_lobe_handle(self, mx: float, my: float, scene_w: float, h: int) -> None:
         v, d = self.viewer, self.drag
         assert d is not None
-        origin, direction = v.camera.ray(mx, my, int(round(scene_w)), h)
-        hit = plane_hit(origin, direction, d["point"], d["normal"])
+        hit = self._drag_hit(mx, my, scene_w, h)
         if hit is None:
             return
         base, name = d["base"], d["handle"]

@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from leafview.botany.lobe_outline import lobed_outline_params
-from leafview.botany.lobes import load_lobed_leaf
+from leafview.botany.lobe_outline import compound_document
 from leafview.core.defaults import DEFAULT_GRID
+from leafview.core.io import read_document
 from leafview.core.params import FieldSpec, LeafParams, ParamError, field_specs, parse_params
 
 __all__ = ["ViewerState", "ViewSettings", "ReferencePhoto", "get_field", "with_field", "HISTORY_LIMIT"]
@@ -259,20 +259,17 @@ class ViewerState:
         it has no leaf file of its own then (save as writes one, never over the compound file).
         """
         p = Path(path).expanduser()
-        compound = False
         try:
-            params = LeafParams.load(p)
+            # a compound file reads as its lobed leaf (the reader leafview.botany.lobe_outline
+            # registers with leafview.core.io), with its errors naming the field
+            leaf = compound_document(read_document(p))
+            compound = leaf is not None
+            params = leaf if leaf is not None else LeafParams.load(p)
         except ParamError as exc:
-            try:
-                params = lobed_outline_params(load_lobed_leaf(p))
-                compound = True
-            except ParamError as lobed_exc:
-                # a compound file that fails says why; any other file keeps the leaf file's error
-                self.error = str(lobed_exc) if "lobed = 1" not in str(lobed_exc) else str(exc)
-                return False
-            except OSError:
-                self.error = str(exc)
-                return False
+            if not exc.source:
+                exc = exc.with_source(str(p))
+            self.error = str(exc)
+            return False
         except OSError as exc:
             self.error = f"{p}: cannot read: {exc.strerror or exc}"
             return False

@@ -35,6 +35,7 @@ from numpy.typing import ArrayLike, NDArray
 from leafview.core.bezier import bernstein
 from leafview.core.blade import axis_frames
 from leafview.core.params import Bending, LeafParams, ParamError, Shape, Transform, Vec3, transform_matrices
+from leafview.deform.fbm import catmull_rom
 
 __all__ = ["solve_bending", "residual", "bend_profile", "bend_profiles", "BendProfile", "BEND_SAMPLES", "MIDRIB_SEGMENTS",
            "PETIOLE_SEGMENTS", "rotation", "sample_clamped"]
@@ -120,12 +121,8 @@ def sample_clamped(values: ArrayLike, v: ArrayLike) -> tuple[NDArray[np.float64]
     p0, p1, p2, p3 = ext[i], ext[i + 1], ext[i + 2], ext[i + 3]
     if vals.ndim > 1:
         x = x[..., None]
-    c1 = 0.5 * (p2 - p0)
-    c2 = p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3
-    c3 = 0.5 * (p3 - p0) + 1.5 * (p1 - p2)
-    value = ((c3 * x + c2) * x + c1) * x + p1
-    slope = ((3.0 * c3 * x + 2.0 * c2) * x + c1) * (k - 1)
-    return value, slope
+    value, slope = catmull_rom(p0, p1, p2, p3, x)
+    return value, slope * (k - 1)
 
 
 def bend_profile(params: LeafParams) -> BendProfile:

@@ -82,6 +82,14 @@ def sample_periodic(signal: ArrayLike, t: ArrayLike) -> tuple[NDArray[np.float64
     x = t - i
     i = i.astype(np.int64)
     p0, p1, p2, p3 = (sig[..., (i + k) % n] for k in (-1, 0, 1, 2))
+    return catmull_rom(p0, p1, p2, p3, x)
+
+
+def catmull_rom(p0: NDArray[np.float64], p1: NDArray[np.float64], p2: NDArray[np.float64], p3: NDArray[np.float64],
+                x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The uniform Catmull-Rom segment from ``p1`` to ``p2`` (neighbours ``p0``, ``p3``) at fraction
+    ``x`` (broadcast against the points): value and d/dx. The one formula behind the signal, bend
+    and sweep splines here and in the shaders (``fbm.glsl``, ``leaf_eval.glsl``)."""
     c1 = 0.5 * (p2 - p0)
     c2 = p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3
     c3 = 0.5 * (p3 - p0) + 1.5 * (p1 - p2)

@@ -47,7 +47,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.params import Ripple
-from leafview.deform.fbm import ripple_signal, sample_periodic
+from leafview.deform.fbm import catmull_rom, ripple_signal, sample_periodic
 
 __all__ = ["SWEEP_ROWS", "RIPPLE_TIE", "ROW_STEPS", "SweepTable", "SweepEval", "sweep_eval", "catmull_rom_periodic",
            "table_texels", "lobed_grid", "texture_window", "texture_uv", "flat_of_uv"]
@@ -173,12 +173,7 @@ def catmull_rom_periodic(q: ArrayLike, x: ArrayLike, *, period_offset: ArrayLike
             val = val + wraps[(...,) + (None,) * (q.ndim - 1)] * np.asarray(period_offset, dtype=np.float64)
         pts.append(val)
     p0, p1, p2, p3 = pts
-    c1 = 0.5 * (p2 - p0)
-    c2 = p0 - 2.5 * p1 + 2.0 * p2 - 0.5 * p3
-    c3 = 0.5 * (p3 - p0) + 1.5 * (p1 - p2)
-    value = ((c3 * f + c2) * f + c1) * f + p1
-    slope = (3.0 * c3 * f + 2.0 * c2) * f + c1
-    return value, slope
+    return catmull_rom(p0, p1, p2, p3, f)
 
 
 def sweep_eval(table: SweepTable, uv: ArrayLike, ripple: Ripple | None = None) -> SweepEval:

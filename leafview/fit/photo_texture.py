@@ -158,12 +158,9 @@ def _extend_colour(rgb: F32, alpha: F32) -> F32:
     return out
 
 
-def leaf_texture(rgb: NDArray[np.floating], mask: NDArray[np.bool_], parts: Sequence[LeafParams],
-                 pixel_from_leaf: ArrayLike, size: int = 512, *, grid: tuple[int, int] = GRID) -> F32:
-    """The front texture (size, size, 4) float32 RGBA of the leaf ``parts`` (one leaf, or the two
-    halves of an asymmetric one) cut from the photo ``rgb`` (h, w, 3) with the leaf ``mask``
-    (h, w), where ``pixel_from_leaf`` (3 × 3) maps leaf-space (x, y) to photo pixels (x right,
-    y down). Rows and columns follow :func:`~leafview.core.texture.texture_st` (row 0 at t = 0)."""
+def _checked(rgb: NDArray[np.floating], mask: NDArray[np.bool_], size: int
+             ) -> tuple[NDArray[np.floating], NDArray[np.bool_]]:
+    """The photo and mask as arrays, checked against each other, and ``size`` checked."""
     if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not MIN_TEXTURE_SIZE <= size <= MAX_TEXTURE_SIZE:
         raise ParamError("texture_size", f"must be a whole number in {MIN_TEXTURE_SIZE}..{MAX_TEXTURE_SIZE}, "
                                          f"got {size!r}")
@@ -171,14 +168,30 @@ def leaf_texture(rgb: NDArray[np.floating], mask: NDArray[np.bool_], parts: Sequ
     msk = np.asarray(mask, dtype=bool)
     if img.ndim != 3 or img.shape[2] != 3 or msk.shape != img.shape[:2]:
         raise ParamError("image", f"expected (h, w, 3) pixels and an (h, w) mask, got {img.shape} and {msk.shape}")
-    u, v = texel_uv(int(size))
-    x, y = pixel_positions(parts, pixel_from_leaf, u, v, grid)
+    return img, msk
+
+
+def _texture(img: NDArray[np.floating], msk: NDArray[np.bool_], x: F64, y: F64, size: int) -> F32:
+    """The (size, size, 4) texture whose texel (i, j) shows photo pixel (x[j, i], y[j, i]): the
+    colour extended past the margin, alpha from the mask."""
     colour, alpha = _sample(img, msk, x, y)
     out = np.empty((size, size, 4), np.float32)
     out[..., :3] = _extend_colour(colour, alpha)
     out[..., 3] = alpha
     np.clip(out, 0.0, 1.0, out=out)
     return out
+
+
+def leaf_texture(rgb: NDArray[np.floating], mask: NDArray[np.bool_], parts: Sequence[LeafParams],
+                 pixel_from_leaf: ArrayLike, size: int = 512, *, grid: tuple[int, int] = GRID) -> F32:
+    """The front texture (size, size, 4) float32 RGBA of the leaf ``parts`` (one leaf, or the two
+    halves of an asymmetric one) cut from the photo ``rgb`` (h, w, 3) with the leaf ``mask``
+    (h, w), where ``pixel_from_leaf`` (3 × 3) maps leaf-space (x, y) to photo pixels (x right,
+    y down). Rows and columns follow :func:`~leafview.core.texture.texture_st` (row 0 at t = 0)."""
+    img, msk = _checked(rgb, mask, size)
+    u, v = texel_uv(int(size))
+    x, y = pixel_positions(parts, pixel_from_leaf, u, v, grid)
+    return _texture(img, msk, x, y, size)
 
 
 def texture_uint8(texture: NDArray[np.floating]) -> NDArray[np.uint8]:
@@ -194,21 +207,10 @@ def lobed_texture(rgb: NDArray[np.floating], mask: NDArray[np.bool_], pixel_from
     :func:`~leafview.deform.sweep.flat_of_uv` (:func:`~leafview.core.texture.uv_of_st` (s, t))
     mapped by ``pixel_from_leaf``; alpha from ``mask``, the colour extended past the margin as
     :func:`leaf_texture` does."""
-    if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not MIN_TEXTURE_SIZE <= size <= MAX_TEXTURE_SIZE:
-        raise ParamError("texture_size", f"must be a whole number in {MIN_TEXTURE_SIZE}..{MAX_TEXTURE_SIZE}, "
-                                         f"got {size!r}")
-    img = np.asarray(rgb)
-    msk = np.asarray(mask, dtype=bool)
-    if img.ndim != 3 or img.shape[2] != 3 or msk.shape != img.shape[:2]:
-        raise ParamError("image", f"expected (h, w, 3) pixels and an (h, w) mask, got {img.shape} and {msk.shape}")
+    img, msk = _checked(rgb, mask, size)
     m = np.asarray(pixel_from_leaf, np.float64)
     us, vs = texel_uv(int(size))                   # u of each column, v of each row
     xs, ys = flat_of_uv(us, vs, window)            # their flat x and y
     x = m[0, 0] * xs[None, :] + m[0, 1] * ys[:, None] + m[0, 2]
     y = m[1, 0] * xs[None, :] + m[1, 1] * ys[:, None] + m[1, 2]
-    colour, alpha = _sample(img, msk, x, y)
-    out = np.empty((size, size, 4), np.float32)
-    out[..., :3] = _extend_colour(colour, alpha)
-    out[..., 3] = alpha
-    np.clip(out, 0.0, 1.0, out=out)
-    return out
+    return _texture(img, msk, x, y, size)
