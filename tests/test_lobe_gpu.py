@@ -254,7 +254,7 @@ def test_lobe_texels_hold_the_cup_and_the_texture_window():
     tex = lobe_texels(table)
     assert tex.shape == (4, SWEEP_ROWS, 4) and tex.dtype == np.float32
     assert tex[2, 0, 3] == np.float32(table.cup)
-    np.testing.assert_array_equal(tex[2, 1:5, 3], np.float32(table.window))
+    np.testing.assert_array_equal(tex[2, 1:5, 3], np.asarray(table.window, np.float32))
     xc, hw, y0, h = table.window     # the window is the flat margin's bounding box
     rim = table.flat[:, 2:]
     assert np.isclose(rim[:, 0].min(), xc - hw) and np.isclose(rim[:, 0].max(), xc + hw)
@@ -355,10 +355,9 @@ def test_readback_of_a_built_table_matches_sweep_eval(renderer, rippled):
     print(f"built{' rippled' if rippled else ''}: positions {pos_err:.2e}, normals {nrm_err:.2e}")
 
 
-def _maple() -> LeafParams | None:
-    """The built-in maple preset, when it is there (assets/presets/maple.toml)."""
-    path = builtin_presets().get("maple")
-    return None if path is None else LeafParams.load(path)
+def _maple() -> LeafParams:
+    """The built-in maple preset (assets/presets/maple.toml)."""
+    return LeafParams.load(builtin_presets()["maple"])
 
 
 @pytest.mark.gl
@@ -377,12 +376,9 @@ def test_lobed_thumbnail(renderer, request):
 
 @pytest.mark.gl
 def test_maple_thumbnail(renderer):
-    """A 128 px top view of the maple preset: a leaf without holes (the paired ties weld). No
-    reference image: the preset's table is generated elsewhere and may still change (the star's
-    image above is the reference)."""
+    """A 128 px top view of the maple preset: a leaf without holes (the paired ties weld); the
+    star's image above is the reference image of the lobed branch."""
     maple = _maple()
-    if maple is None:
-        pytest.skip("the maple preset (assets/presets/maple.toml) is not there")
     img = renderer.render(maple, (128, 128), "top")
     alpha = img[..., 3] > 0
     assert 0.2 < alpha.mean() < 0.8
@@ -392,8 +388,6 @@ def test_maple_thumbnail(renderer):
 @pytest.mark.gl
 def test_maple_readback_matches_sweep_eval(renderer):
     maple = _maple()
-    if maple is None:
-        pytest.skip("the maple preset (assets/presets/maple.toml) is not there yet")
     assert maple.lobes.enabled
     table = sweep_table(maple.lobes)
     rip = maple.ripple if maple.ripple.enabled else None

@@ -22,7 +22,6 @@ from leafview.botany.shapes import shapes_params
 from leafview.core.bspline import evaluate_closed, fit_closed, sample_closed, signed_area
 from leafview.core.lobes import Lobes, parse_outline
 from leafview.core.params import LeafParams, ParamError
-from leafview.resources import builtin_presets
 
 
 def star(lobes: int = 5, depth: float = 0.35, controls: int = 64, name: str = "star") -> LeafParams:
@@ -176,10 +175,9 @@ def test_zero_weight_reference_is_dropped_with_its_size(star5):
         assert fa.lobes.outline == fb.lobes.outline and fa.transform.scale == pytest.approx(fb.transform.scale)
 
 
-LOBED_PRESETS = [n for n in ("maple", "oak", "bilobed") if n in builtin_presets()]
+LOBED_PRESETS = ["maple", "oak", "bilobed"]
 
 
-@pytest.mark.skipif(not LOBED_PRESETS, reason="no lobed presets (assets/presets/maple.toml, ...) installed yet")
 @pytest.mark.parametrize("name", LOBED_PRESETS)
 def test_unilobed_to_each_lobed_preset(name):
     target = load_key_shape(name)
