@@ -7,12 +7,13 @@ importing the whole parameter set.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 from leafview.errors import ParamError
 
-__all__ = ["FieldSpec", "spec_field", "number", "check_range", "check_choice"]
+__all__ = ["FieldSpec", "spec_field", "number", "integer", "check_range", "check_choice", "check_table", "parse_list"]
 
 
 @dataclass(frozen=True)
@@ -73,3 +74,41 @@ def check_choice(value: Any, spec: FieldSpec, path: str) -> str:
     if value not in spec.choices:
         raise ParamError(path, f"{value!r} is not one of {', '.join(spec.choices)}")
     return value
+
+
+def integer(value: Any, spec: FieldSpec, path: str) -> int:
+    """``value`` as an int inside ``spec``'s hard range, else a :class:`ParamError` naming ``path``."""
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ParamError(path, f"expected an integer, got {type(value).__name__} {value!r}")
+    check_range(float(value), spec, path)
+    return int(value)
+
+
+def check_table(value: Any, path: str, specs: Mapping[str, FieldSpec], required: tuple[str, ...], what: str) -> None:
+    """``value`` must be a table (``what`` says of which fields) with only the keys of ``specs``
+    and every key of ``required``; errors name ``path`` or ``path.key``."""
+    if not isinstance(value, Mapping):
+        raise ParamError(path, f"expected a table with {what}, got {type(value).__name__}")
+    for key in value:
+        if key not in specs:
+            raise ParamError(f"{path}.{key}", f"unknown key (known: {', '.join(specs)})")
+    for key in required:
+        if key not in value:
+            raise ParamError(f"{path}.{key}", "missing field")
+
+
+T = TypeVar("T")
+
+
+def parse_list(value: Any, path: str, kind: type[T], as_table: Callable[[T], dict[str, Any]],
+               parse_item: Callable[[Any, str], T], most: int, noun: str) -> tuple[T, ...]:
+    """A list of tables (``[[path]]``), each parsed by ``parse_item(table, "path[i]")``: at most
+    ``most`` of them (``noun`` names them in the error). A tuple of ``kind`` objects is accepted
+    as it is written back (``as_table``), so validated values round-trip."""
+    if isinstance(value, tuple) and all(isinstance(item, kind) for item in value):
+        value = [as_table(item) for item in value]
+    if not isinstance(value, (list, tuple)):
+        raise ParamError(path, f"expected a list of {noun} tables, got {type(value).__name__}")
+    if len(value) > most:
+        raise ParamError(path, f"{len(value)} {noun}s; at most {most} are accepted")
+    return tuple(parse_item(item, f"{path}[{i}]") for i, item in enumerate(value))

@@ -29,7 +29,6 @@ closed curve), the valleys (on it) and the edits; the skeleton and the sweep liv
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -37,7 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leafview.core.bspline import MAX_CONTROLS, MIN_CONTROLS, sample_closed
-from leafview.core.fieldspec import FieldSpec, check_range, number, spec_field
+from leafview.core.fieldspec import FieldSpec, check_range, check_table, integer, number, parse_list, spec_field
 from leafview.errors import ParamError
 
 __all__ = ["Lobes", "BranchTurtle", "MAX_BRANCHES", "MAX_VALLEYS", "OUTLINE_LIMIT", "VALLEY_TOLERANCE",
@@ -186,26 +185,17 @@ def parse_valleys(value: Any, outline: tuple[tuple[float, float], ...], path: st
 def _turtle(value: Any, path: str) -> BranchTurtle:
     if isinstance(value, BranchTurtle):
         value = turtle_dict(value)
-    if not isinstance(value, Mapping):
-        raise ParamError(path, f"expected a table with branch, bend, twist and turn, got {type(value).__name__}")
     specs = turtle_specs()
-    for key in value:
-        if key not in specs:
-            raise ParamError(f"{path}.{key}", f"unknown key (known: {', '.join(specs)})")
-    if "branch" not in value:
-        raise ParamError(f"{path}.branch", "missing field")
+    check_table(value, path, specs, ("branch",), "branch, bend, twist and turn")
     out: dict[str, Any] = {}
     for name, spec in specs.items():
-        where = f"{path}.{name}"
         if name not in value:
             continue
-        x = value[name]
+        where = f"{path}.{name}"
         if name == "branch":
-            if isinstance(x, bool) or not isinstance(x, int):
-                raise ParamError(where, f"expected an integer, got {type(x).__name__} {x!r}")
-            check_range(float(x), spec, where)
-            out[name] = int(x)
+            out[name] = integer(value[name], spec, where)
             continue
+        x = value[name]
         if isinstance(x, np.ndarray):
             x = x.tolist()
         if not isinstance(x, (list, tuple)) or len(x) != TURTLE_KNOTS:
@@ -219,13 +209,7 @@ def _turtle(value: Any, path: str) -> BranchTurtle:
 
 def parse_branches(value: Any, path: str = "lobes.branches") -> tuple[BranchTurtle, ...]:
     """Validate the turtle edits (``[[lobes.branches]]`` tables); each branch at most once."""
-    if isinstance(value, tuple) and all(isinstance(b, BranchTurtle) for b in value):
-        value = [turtle_dict(b) for b in value]
-    if not isinstance(value, (list, tuple)):
-        raise ParamError(path, f"expected a list of branch tables, got {type(value).__name__}")
-    if len(value) > MAX_BRANCHES:
-        raise ParamError(path, f"{len(value)} branch edits; at most {MAX_BRANCHES}")
-    out = tuple(_turtle(item, f"{path}[{i}]") for i, item in enumerate(value))
+    out = parse_list(value, path, BranchTurtle, turtle_dict, _turtle, MAX_BRANCHES, "branch edit")
     seen: dict[int, int] = {}
     for i, b in enumerate(out):
         if b.branch in seen:

@@ -31,11 +31,10 @@ so files from before venation existed read and write back unchanged.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
-from leafview.core.fieldspec import FieldSpec, check_range, number, spec_field
+from leafview.core.fieldspec import FieldSpec, check_range, check_table, integer, number, parse_list, spec_field
 from leafview.errors import ParamError
 
 __all__ = ["PATTERNS", "MAX_EDITS", "MAX_SECONDARIES", "Venation", "VeinEdit", "edit_specs", "parse_edits",
@@ -105,44 +104,27 @@ def edit_specs() -> dict[str, FieldSpec]:
 
 
 def _edit(value: Any, path: str) -> VeinEdit:
-    if not isinstance(value, Mapping):
-        raise ParamError(path, f"expected a table with vein, side, angle and bulge, got {type(value).__name__}")
     specs = edit_specs()
-    for key in value:
-        if key not in specs:
-            raise ParamError(f"{path}.{key}", f"unknown key (known: {', '.join(specs)})")
+    check_table(value, path, specs, ("vein", "side"), "vein, side, angle and bulge")
     out: dict[str, Any] = {}
     for name, spec in specs.items():
-        where = f"{path}.{name}"
         if name not in value:
-            if name in ("vein", "side"):
-                raise ParamError(where, "missing field")
             continue
-        x = value[name]
+        where = f"{path}.{name}"
         if spec.kind == "int":
-            if isinstance(x, bool) or not isinstance(x, int):
-                raise ParamError(where, f"expected an integer, got {type(x).__name__} {x!r}")
-            check_range(float(x), spec, where)
-            if name == "side" and x == 0:
+            out[name] = integer(value[name], spec, where)
+            if name == "side" and out[name] == 0:
                 raise ParamError(where, "0 is not a side: -1 (the u < 0 half) or +1 (the u > 0 half)")
-            out[name] = int(x)
         else:
-            f = number(x, where)
-            check_range(f, spec, where)
-            out[name] = f
+            out[name] = number(value[name], where)
+            check_range(out[name], spec, where)
     return VeinEdit(**out)
 
 
 def parse_edits(value: Any, path: str = "venation.edits") -> tuple[VeinEdit, ...]:
     """Validate the ``edits`` list (``[[venation.edits]]`` tables); errors name
     ``venation.edits[i].field``. Each (vein, side) may be edited once."""
-    if isinstance(value, tuple) and all(isinstance(e, VeinEdit) for e in value):
-        value = [edit_dict(e) for e in value]
-    if not isinstance(value, (list, tuple)):
-        raise ParamError(path, f"expected a list of edit tables, got {type(value).__name__}")
-    if len(value) > MAX_EDITS:
-        raise ParamError(path, f"{len(value)} edits; at most {MAX_EDITS} are accepted")
-    edits = tuple(_edit(item, f"{path}[{i}]") for i, item in enumerate(value))
+    edits = parse_list(value, path, VeinEdit, edit_dict, _edit, MAX_EDITS, "edit")
     seen: dict[tuple[int, int], int] = {}
     for i, e in enumerate(edits):
         key = (e.vein, e.side)
