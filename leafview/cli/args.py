@@ -6,23 +6,24 @@ Argument types raise :class:`argparse.ArgumentTypeError` (argparse prints the me
 reports with exit code 2 before anything is written.
 
 Compound leaf files (``lobed = 1``, ``assets/compound/*.toml``) load wherever a leaf file does:
-importing this module imports :mod:`leafview.botany.lobe_outline`, which registers their reader
-with :mod:`leafview.core.io`.
+this module registers a reader with :mod:`leafview.core.io` that hands them to
+:func:`leafview.botany.lobe_outline.compound_document`, loaded on the first such file (it brings
+scipy.optimize and shapely: half a second that every command would otherwise pay at start).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import sys
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
 from leafview.atomic import UniqueNames, check_folder, check_target
-from leafview.botany import lobe_outline as _compound_files  # noqa: F401  (registers the compound-file reader)
-from leafview.core.io import load_leaves
+from leafview.core.io import load_leaves, register_document_reader
 from leafview.core.limits import MAX_GRID, MAX_IMAGE_SIDE, parse_count
 from leafview.core.params import LeafParams
 from leafview.errors import ParamError, UsageError
@@ -157,6 +158,17 @@ def load_framable_leaves(paths: Sequence[Path]) -> list[LeafParams]:
                 raise exc.with_source(str(path)) from None
             leaves.append(leaf)
     return leaves
+
+
+def _compound_document(data: Any) -> LeafParams | None:
+    """The lobed leaf of a compound document, None for any other (see the module docstring)."""
+    if not (isinstance(data, Mapping) and "lobed" in data):
+        return None
+    leaf: LeafParams = importlib.import_module("leafview.botany.lobe_outline").compound_document(data)
+    return leaf
+
+
+register_document_reader(_compound_document)
 
 
 # -- outputs ------------------------------------------------------------------------------------
