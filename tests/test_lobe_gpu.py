@@ -14,7 +14,7 @@ from leafview.core.defaults import DEFAULT_GRID, DETAIL_GRID, LOBED_GRID
 from leafview.core.lobes import BranchTurtle, Lobes
 from leafview.core.params import LeafParams, Material, Ripple, Transform
 from leafview.deform.surface import evaluate, grid_uv
-from leafview.deform.sweep import SWEEP_ROWS, SweepTable, catmull_rom_periodic, sweep_eval
+from leafview.deform.sweep import SWEEP_ROWS, SweepTable, catmull_rom_periodic, sweep_eval, table_texels
 from leafview.gpu.instanced import InstancedLeaves
 from leafview.gpu.layout import (
     BRANCH_LOBE,
@@ -30,7 +30,7 @@ from leafview.gpu.layout import (
     ripple_keys,
     without_derived,
 )
-from leafview.gpu.lobe_tables import LobeTables, lobe_keys, lobe_texels, lobed_grid
+from leafview.gpu.lobe_tables import LobeTables, lobe_keys, lobed_grid
 from leafview.gpu.renderer import DRAW_VARYINGS, DRAW_VERTEX_BYTES, LeafRenderer
 from leafview.gpu.sheets import render_leaves
 from leafview.gpu.targets import OffscreenTarget
@@ -251,7 +251,7 @@ def test_lobe_slot_and_branch_code_round_trip():
 
 def test_lobe_texels_hold_the_cup_and_the_texture_window():
     table = turtle_table()
-    tex = lobe_texels(table)
+    tex = table_texels(table)
     assert tex.shape == (4, SWEEP_ROWS, 4) and tex.dtype == np.float32
     assert tex[2, 0, 3] == np.float32(table.cup)
     np.testing.assert_array_equal(tex[2, 1:5, 3], np.asarray(table.window, np.float32))
@@ -311,7 +311,7 @@ def test_lobe_tables_hold_one_layer_per_key(gl):
         assert layers.tolist() == [0, -1, 1, 0] and tables.keys == lobe_keys(leaves)
         assert tables.texture is not None and tables.texture.size == (SWEEP_ROWS, 4, 2)
         got = np.frombuffer(tables.texture.read(), np.float32).reshape(2, 4, SWEEP_ROWS, 4)
-        np.testing.assert_array_equal(got[1], lobe_texels(disk_table()))
+        np.testing.assert_array_equal(got[1], table_texels(disk_table()))
         before = tables.uploads
         assert tables.update(leaves).tolist() == [0, -1, 1, 0] and tables.uploads == before   # nothing rewritten
         tables.use()

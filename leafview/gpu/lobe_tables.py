@@ -7,7 +7,7 @@ of railroad ties that ``shaders/leaf_eval.glsl`` (``lobe_eval``) interpolates ex
 :func:`~leafview.deform.sweep.sweep_eval` does. :class:`LobeTables` holds those tables: one layer of
 an RGBA32F ``sampler2DArray`` (``leaf_lobe_table`` at ``LOBE_UNIT``) per distinct
 :class:`~leafview.core.lobes.Lobes` value, N texels wide (the ties) and four texel rows high
-(:func:`lobe_texels`). :meth:`LobeTables.update` returns each leaf's layer (-1 unlobed), to be
+(:func:`~leafview.deform.sweep.table_texels`). :meth:`LobeTables.update` returns each leaf's layer (-1 unlobed), to be
 packed into the records (``pack_leaves(..., lobe_layers=layers)``); the prepare pass folds it into
 the branch code the vertex stage reads.
 
@@ -30,25 +30,14 @@ from leafview.deform.sweep import ROW_STEPS, SWEEP_ROWS, SweepTable, lobed_grid,
 from leafview.errors import GpuLimitError, ParamError
 from leafview.gpu.layout import LOBE_TABLE_ROWS, LOBE_UNIT
 
-__all__ = ["LobeTables", "lobe_texels", "lobe_keys", "lobed_grid", "is_lobed", "ROW_STEPS"]
-
-def is_lobed(params: LeafParams) -> bool:
-    """Whether ``params`` is a lobed leaf (drawn from a sweep table)."""
-    return bool(params.lobes.enabled)
-
-
-def lobe_texels(table: SweepTable) -> NDArray[np.float32]:
-    """The (4, N, 4) float32 texels of one layer: :func:`~leafview.deform.sweep.table_texels` (the
-    cup and the texture window in the spare w of texel row 2, where ``lobe_eval`` reads them)."""
-    return table_texels(table)
-
+__all__ = ["LobeTables", "lobe_keys", "lobed_grid", "ROW_STEPS"]
 
 def lobe_keys(leaves: Sequence[LeafParams]) -> list[Lobes]:
     """The distinct :class:`Lobes` of the lobed leaves among ``leaves``, in order of first use:
     layer i of the array holds ``keys[i]`` (the layers :meth:`LobeTables.update` returns)."""
     keys: dict[Lobes, int] = {}
     for p in leaves:
-        if is_lobed(p):
+        if p.lobes.enabled:
             keys.setdefault(p.lobes, len(keys))
     return list(keys)
 
@@ -81,7 +70,7 @@ class LobeTables:
             table = self.table_of(key)
             if table.rows != SWEEP_ROWS:
                 raise ParamError("lobes", f"a sweep table of {table.rows} ties; the GPU path draws {SWEEP_ROWS}")
-            found = lobe_texels(table)
+            found = table_texels(table)
             if not np.isfinite(found).all():
                 raise ParamError("lobes", "the sweep table holds a non-finite value")
             self._texels[key] = found
@@ -113,7 +102,7 @@ class LobeTables:
             self.uploads += int(data.nbytes)
             self.keys = keys
         index = {k: i for i, k in enumerate(keys)}
-        return np.array([index[p.lobes] if is_lobed(p) else -1 for p in leaves], np.int32)
+        return np.array([index[p.lobes] if p.lobes.enabled else -1 for p in leaves], np.int32)
 
     def use(self) -> None:
         """Bind the array at ``LOBE_UNIT`` (nothing without lobed leaves)."""

@@ -64,7 +64,7 @@ from leafview.gpu.limits import (
     context_alive,
     ensure_alive,
 )
-from leafview.gpu.lobe_tables import LobeTables, is_lobed, lobed_grid
+from leafview.gpu.lobe_tables import LobeTables, lobed_grid
 from leafview.gpu.owner import GLObjects, GrowingBuffer
 from leafview.gpu.prepare import LeafPrepare
 from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, JitterTable
@@ -342,7 +342,7 @@ class LeafRenderer:
         images: list[NDArray[Any]] = [np.zeros(0)] * len(leaves)
         # lobed leaves are drawn on their own grid: each kind in chunks of its own, images in order
         for lobed in (False, True):
-            picks = [i for i, p in enumerate(leaves) if is_lobed(p) == lobed]
+            picks = [i for i, p in enumerate(leaves) if p.lobes.enabled == lobed]
             kind_grid = lobed_grid((nu, nv)) if lobed else (nu, nv)
             kind_chunk = max(1, min(chunk, MAX_RESOURCE_BYTES // (kind_grid[0] * kind_grid[1] * DRAW_VERTEX_BYTES)))
             for start in range(0, len(picks), kind_chunk):
