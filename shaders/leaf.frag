@@ -43,7 +43,7 @@ flat in vec2 v_vein_style;  // relief, major veins' width
 flat in uint v_leaf;
 #endif
 #include "generated/aov_outputs.glsl"
-#else
+#elif !defined(LEAF_DEPTH)
 out vec4 frag_color;
 #endif
 
@@ -107,6 +107,16 @@ void main() {
 #endif
     aov_depth = -(frame.view * vec4(v_world, 1.0)).z;   // along the optical axis, perspective or not
     aov_normal = vec4(visible_normal(), 0.0);
+}
+#elif defined(LEAF_DEPTH)
+// depth only (the sun's shadow maps, leafview/gpu/shadow.py): a textured leaf's transparent texels
+// cast no shadow
+void main() {
+#if !defined(LEAF_NO_TEXTURE) && !defined(LEAF_STEMS)
+    vec3 albedo;
+    bool textured;
+    if (!leaf_albedo(albedo, textured, true)) discard;
+#endif
 }
 #else
 void main() {

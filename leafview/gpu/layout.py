@@ -44,7 +44,8 @@ from leafview.core.texture import LeafTexture
 from leafview.deform.beam import BEND_SAMPLES, bend_profile
 from leafview.deform.fbm import RIPPLE_SAMPLES
 
-__all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "SPECIES_CULL_BLOCK", "DRAW_COMMAND_DTYPE", "FBM_JOB_DTYPE",
+__all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "LIGHT_BLOCK", "SHADOW_BLOCK", "WIND_BLOCK",
+           "LIGHT_BINDING", "SHADOW_BINDING", "WIND_BINDING", "SHADOW_UNIT", "SSAO_UNIT", "SPECIES_CULL_BLOCK", "DRAW_COMMAND_DTYPE", "FBM_JOB_DTYPE",
            "Binding", "BINDINGS", "binding_defines", "bindings_glsl",
            "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "SIGNALS_BINDING", "SPECIES_OF_BINDING",
            "SPECIES_BINDING", "COMMANDS_BINDING", "VISIBLE_BINDING", "FBM_JOBS_BINDING", "READBACK_BINDING",
@@ -177,6 +178,42 @@ FRAME_BLOCK = Block(
     "camera, lights and output flags of one frame",
 )
 
+# -- the canopy look (leafview/gpu/canopy.py): sun, sky, ground, tone; shadows; wind ---------------
+LIGHT_BLOCK = Block(
+    "LightData", "Light",
+    (
+        ("sun", "vec4", 1),          # xyz direction towards the sun (world, unit), w irradiance
+        ("sun_colour", "vec4", 1),   # rgb, w unused
+        ("sky_zenith", "vec4", 1),   # zenith radiance rgb, w 1: sky drawn
+        ("sky_horizon", "vec4", 1),  # horizon radiance rgb, w 1: ground drawn
+        ("ground", "vec4", 1),       # ground albedo rgb, w the ground's height (world z)
+        ("sky_sh", "vec4", 9),       # irradiance of sky and ground as 9 spherical-harmonic rgb coefficients
+        ("tone", "vec4", 1),         # x 2^exposure, y tone map (0 linear, 1 filmic), z transmission, w gloss
+        ("flags", "ivec4", 1),       # x shadows on, y ambient occlusion on, z alpha to coverage, w unused
+    ),
+    "sun, sky, ground and camera response of a canopy frame (leafview.scene.lighting)",
+)
+
+SHADOW_BLOCK = Block(
+    "ShadowData", "Shadow",
+    (
+        ("matrices", "mat4", 4),     # world -> the sun's clip space, one per cascade
+        ("splits", "vec4", 1),       # far end of each cascade (view-space distance along the optical axis)
+        ("params", "vec4", 1),       # x cascades, y depth bias, z normal offset (world), w 1 / map size
+    ),
+    "the sun's cascaded shadow maps (leafview/gpu/shadow.py)",
+)
+
+WIND_BLOCK = Block(
+    "WindData", "Wind",
+    (
+        ("wind", "vec4", 1),         # xy direction the wind blows towards (world, unit), z speed, w time
+        ("gust", "vec4", 1),         # wind helper's: gust and turbulence settings
+        ("flutter", "vec4", 1),      # wind helper's: blade flutter settings
+    ),
+    "the wind of a frame (leafview.deform.wind)",
+)
+
 SPECIES_CULL_BLOCK = Block(
     "SpeciesCull", "SpeciesCullBlock",
     (
@@ -221,6 +258,11 @@ VEIN_FIELD_UNIT = 4      # sampler leaf_vein_field: the vein fields (distance, o
 VEIN_GRID_UNIT = 5       # sampler leaf_vein_grid: the vein-shape grids (displacement, ripple coordinate)
 VEIN_STYLE_UNIT = 6      # sampler leaf_vein_style: venation contrast and relief, one texel per vein layer
 LOBE_UNIT = 7            # sampler leaf_lobe_table: the lobed leaves' sweep tables, one array layer per table
+SHADOW_UNIT = 8          # sampler sun_shadow: the sun's shadow map cascades (depth array texture)
+SSAO_UNIT = 9            # sampler ambient_occlusion: the frame's screen-space ambient occlusion
+LIGHT_BINDING = 14       # uniform Light: sun, sky, ground, tone (canopy frames)
+SHADOW_BINDING = 15      # uniform Shadow: the sun's cascade matrices
+WIND_BINDING = 16        # uniform Wind: the frame's wind
 VEIN_FIELD_SAMPLER = "leaf_vein_field"
 """GLSL name of the ``sampler2DArray`` at :data:`VEIN_FIELD_UNIT` (``shaders/leaf_veins.glsl``)."""
 VEIN_GRID_SAMPLER = "leaf_vein_grid"
@@ -269,6 +311,11 @@ BINDINGS: tuple[Binding, ...] = (
     Binding("VEIN_GRID_UNIT", VEIN_GRID_UNIT, "sampler", VEIN_GRID_SAMPLER, "vein-shape grids (leafview/gpu/vein_field.py)"),
     Binding("VEIN_STYLE_UNIT", VEIN_STYLE_UNIT, "sampler", "leaf_vein_style", "contrast, relief per vein layer"),
     Binding("LOBE_UNIT", LOBE_UNIT, "sampler", LOBE_SAMPLER, "lobed leaves' sweep tables (leafview/gpu/lobe_tables.py)"),
+    Binding("SHADOW_UNIT", SHADOW_UNIT, "sampler", "sun_shadow", "the sun's shadow cascades (leafview/gpu/shadow.py)"),
+    Binding("SSAO_UNIT", SSAO_UNIT, "sampler", "ambient_occlusion", "screen-space ambient occlusion (leafview/gpu/ssao.py)"),
+    Binding("LIGHT_BINDING", LIGHT_BINDING, "uniform", "Light", "sun, sky, ground, tone (leafview/gpu/canopy.py)"),
+    Binding("SHADOW_BINDING", SHADOW_BINDING, "uniform", "Shadow", "the sun's cascades (leafview/gpu/shadow.py)"),
+    Binding("WIND_BINDING", WIND_BINDING, "uniform", "Wind", "the frame's wind (leafview/gpu/wind.py)"),
 )
 
 
@@ -948,6 +995,9 @@ def generated_sources() -> dict[str, str]:
         "generated/leaf_attributes.glsl": attributes_glsl(),
         "generated/leaf_row.glsl": row_glsl(),
         "generated/frame_block.glsl": FRAME_BLOCK.glsl("FRAME_BINDING"),
+        "generated/light_block.glsl": LIGHT_BLOCK.glsl("LIGHT_BINDING"),
+        "generated/shadow_block.glsl": SHADOW_BLOCK.glsl("SHADOW_BINDING"),
+        "generated/wind_block.glsl": WIND_BLOCK.glsl("WIND_BINDING"),
         "generated/scene_blocks.glsl": (SPECIES_CULL_BLOCK.struct_glsl()
                                         + struct_from_dtype("DrawCommand", DRAW_COMMAND_DTYPE)),
         "generated/fbm_job.glsl": struct_from_dtype("FbmJob", FBM_JOB_DTYPE),

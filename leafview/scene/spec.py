@@ -63,7 +63,9 @@ from leafview.core.params import (
 )
 from leafview.deform.beam import bend_profile
 from leafview.deform.surface import grid_uv, partials
+from leafview.deform.wind import WindSettings
 from leafview.resources import builtin_presets
+from leafview.scene.lighting import LightSettings
 from leafview.scene.plants import LEAVES_PER_PLANT, Placement, PlantSpec, scatter
 
 __all__ = ["SceneSpec", "Scene", "build_scene", "load_scene", "save_scene", "scene_from_leaves", "LAYOUTS", "VARIED",
@@ -100,6 +102,8 @@ class SceneSpec:
     stems: bool = True
     plant: Mapping[str, Any] = field(default_factory=dict)
     name: str = ""
+    light: LightSettings = field(default_factory=LightSettings)   # [light]: sun, sky, ground, tone
+    wind: WindSettings = field(default_factory=WindSettings)      # [wind]: speed, direction, time
 
     def __post_init__(self) -> None:
         if not self.species:
@@ -163,6 +167,10 @@ class SceneSpec:
         out: dict[str, Any] = {"schema": SCENE_SCHEMA, "scene": scene, "species": species}
         if self.plant:
             out["plant"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.plant.items()}
+        for key in ("light", "wind"):
+            table = getattr(self, key).to_dict()
+            if table:
+                out[key] = table
         return out
 
     @classmethod
@@ -175,9 +183,9 @@ class SceneSpec:
         ``allow_outside``."""
         if not isinstance(data, Mapping):
             raise ParamError("", "expected a table at the top level")
-        unknown = set(data) - {"schema", "scene", "species", "plant"}
+        unknown = set(data) - {"schema", "scene", "species", "plant", "light", "wind"}
         if unknown:
-            raise ParamError(sorted(unknown)[0], "unknown table (expected schema, scene, species, plant)")
+            raise ParamError(sorted(unknown)[0], "unknown table (expected schema, scene, species, plant, light, wind)")
         if data.get("schema") != SCENE_SCHEMA:
             raise ParamError("schema", f"expected schema = {SCENE_SCHEMA}, got {data.get('schema')!r}")
         scene = data.get("scene", {})
@@ -220,7 +228,9 @@ class SceneSpec:
                    variation=scene.get("variation", defaults["variation"].default),
                    colour_variation=scene.get("colour_variation", defaults["colour_variation"].default),
                    stems=scene.get("stems", defaults["stems"].default),
-                   plant=dict(plant), name=check_name(scene.get("name", ""), "scene.name"))
+                   plant=dict(plant), name=check_name(scene.get("name", ""), "scene.name"),
+                   light=LightSettings.from_dict(data.get("light", {})),
+                   wind=WindSettings.from_dict(data.get("wind", {})))
 
 
 def _species_leaf(table: Any, where: str) -> LeafParams:
@@ -367,6 +377,14 @@ class Scene:
     matrices: NDArray[np.float64]
     stems: tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.uint32]] | None
     placement: Placement | None
+    # per-leaf additions to Ω (VARIED order) made by scene-wide edits (leafview.scene.scene_edits):
+    # a leaf's Ω is its species' × factors + offsets; None: no offsets
+    offsets: NDArray[np.float32] | None = None
+    # per-leaf variety (leafview.scene.variety): ripple phase offset, ripple amplitude factor, bend
+    # load factor, each (N,) float32; None: every leaf takes its species' value
+    ripple_phase: NDArray[np.float32] | None = None
+    ripple_scale: NDArray[np.float32] | None = None
+    load_scale: NDArray[np.float32] | None = None
 
     def __len__(self) -> int:
         return int(self.species_id.shape[0])

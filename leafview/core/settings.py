@@ -1,0 +1,104 @@
+"""Settings tables: frozen dataclasses whose fields carry a :class:`~leafview.core.fieldspec.FieldSpec`
+(made with :func:`~leafview.core.fieldspec.spec_field`), checked on construction, read from and
+written to a TOML/JSON table.
+
+The light, wind and per-leaf variety settings of a scene (``[light]``, ``[wind]``,
+``[[species]] variety``) are such tables; so the checks, the error paths (``light.sun``), the file
+form and the viewer's sliders come from one declaration per setting.
+
+Field kinds understood here: ``float``, ``int``, ``bool``, ``choice`` and ``pair`` (two numbers, each
+inside the hard range; a ``pair`` with ``ordered`` in its group name is not checked for order here:
+a class checks what its pairs mean in its own ``check``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import fields, replace
+from typing import Any, TypeVar
+
+from leafview.core.fieldspec import FieldSpec, check_choice, check_range, integer, number
+from leafview.errors import ParamError
+
+__all__ = ["SettingsTable", "field_specs", "check_value"]
+
+S = TypeVar("S", bound="SettingsTable")
+
+
+def field_specs(cls: Any) -> dict[str, FieldSpec]:
+    """``{name: FieldSpec}`` of a settings class's fields, in declaration order."""
+    return {f.name: f.metadata["spec"] for f in fields(cls) if "spec" in f.metadata}
+
+
+def check_value(value: Any, spec: FieldSpec, path: str) -> Any:
+    """``value`` checked against ``spec`` and normalised (float, int, bool, str or a pair of floats);
+    a :class:`ParamError` naming ``path`` otherwise."""
+    kind = spec.kind
+    if kind == "bool":
+        if not isinstance(value, bool):
+            raise ParamError(path, f"expected true or false, got {type(value).__name__} {value!r}")
+        return value
+    if kind == "int":
+        return integer(value, spec, path)
+    if kind == "choice":
+        return check_choice(value, spec, path)
+    if kind == "pair":
+        if not isinstance(value, (list, tuple)) or len(value) != 2:
+            raise ParamError(path, f"expected two numbers, got {value!r}")
+        out = tuple(number(x, f"{path}[{i}]") for i, x in enumerate(value))
+        for i, x in enumerate(out):
+            check_range(x, spec, f"{path}[{i}]")
+        return out
+    x = number(value, path)
+    check_range(x, spec, path)
+    return x
+
+
+class SettingsTable:
+    """Mixin of a frozen dataclass of spec fields. ``TABLE`` is the table's name in a file (the
+    prefix of every error path). Subclasses may override :meth:`check` for rules between fields
+    (called after every field passed its own check)."""
+
+    TABLE = ""
+
+    def __post_init__(self) -> None:
+        for name, spec in field_specs(type(self)).items():
+            object.__setattr__(self, name, check_value(getattr(self, name), spec, f"{self.TABLE}.{name}"))
+        self.check()
+
+    def check(self) -> None:
+        """Rules between fields (raise ParamError naming the field)."""
+
+    @classmethod
+    def from_dict(cls: type[S], data: Any, path: str | None = None) -> S:
+        """The settings of a table (missing keys take their defaults); unknown keys and bad values
+        raise :class:`ParamError` naming ``path.key`` (``path`` defaults to :attr:`TABLE`)."""
+        where = cls.TABLE if path is None else path
+        if not isinstance(data, Mapping):
+            raise ParamError(where, f"expected a table, got {type(data).__name__}")
+        specs = field_specs(cls)
+        for key in data:
+            if key not in specs:
+                raise ParamError(f"{where}.{key}", f"unknown setting (known: {', '.join(specs)})")
+        values = {k: check_value(v, specs[k], f"{where}.{k}") for k, v in data.items()}
+        try:
+            return cls(**values)
+        except ParamError as exc:
+            if where != cls.TABLE and exc.path.startswith(cls.TABLE):
+                raise ParamError(where + exc.path[len(cls.TABLE):], exc.message) from None
+            raise
+
+    def to_dict(self, *, changed_only: bool = True) -> dict[str, Any]:
+        """The file form: every setting that differs from its default (all with ``changed_only``
+        False); pairs as lists."""
+        default = type(self)()
+        out: dict[str, Any] = {}
+        for name in field_specs(type(self)):
+            v = getattr(self, name)
+            if changed_only and v == getattr(default, name):
+                continue
+            out[name] = list(v) if isinstance(v, tuple) else v
+        return out
+
+    def replace(self: S, **changes: Any) -> S:
+        return replace(self, **changes)  # type: ignore[type-var]
