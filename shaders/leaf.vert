@@ -69,6 +69,22 @@ flat out uint v_leaf;
 #define LEAF_INDEX 0u
 #endif
 #endif
+#ifdef LEAF_WIND
+// wind (leaf_wind.glsl, the Wind block of leafview/gpu/wind.py): the leaf moved in leaf space, so
+// v_object and v_object_normal (transform feedback) include it; each leaf's phase comes from its
+// index in the scene
+#include "leaf_wind.glsl"
+#if defined(LEAF_INDIRECT)
+#ifndef LEAF_AOV
+#include "generated/aov_vertex.glsl"
+#endif
+#define WIND_LEAF_INDEX (leaf_offset + LEAF_ROW_INDEX)
+#elif defined(LEAF_INSTANCED)
+#define WIND_LEAF_INDEX uint(gl_InstanceID)
+#else
+#define WIND_LEAF_INDEX 0u
+#endif
+#endif
 
 void main() {
 #if defined(LEAF_INSTANCED) || defined(LEAF_INDIRECT)
@@ -104,6 +120,9 @@ void main() {
         n = leaf_normal(e, uv.y);
         v_rib = vec2(abs(uv.x), uv.y);   // the midrib, fading toward the apex
     }
+#ifdef LEAF_WIND
+    wind_displace(L, n, LEAF.model, WIND_LEAF_INDEX);
+#endif
     v_object = L;
     v_object_normal = n;
     // mat4x3: the model matrix's last row holds the texture layers (leafview/gpu/layout.py, LEAF_SLOTS)

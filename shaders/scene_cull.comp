@@ -27,6 +27,12 @@ uniform ivec2 group_levels;   // levels of detail (grids) of each grid group
 uniform ivec2 group_first;    // the draw command of each group's finest level
 uniform int forced_level;     // >= 0: every visible leaf at this level (LOD off; the group's last at most)
 uniform bool frustum;         // false: no frustum or size test (culling off)
+// wind (leafview/gpu/wind.py, set_cull_padding; 0: still): the largest petiole turn phi, midrib
+// coefficient k and flutter factor f of leafview.deform.wind.cull_bounds. A point within s leaf
+// lengths of its base flutters by at most a = 3 f s^2 (1/2 + s), then turns about the base by at
+// most psi = min(phi + k s (6 - 4 s + s^2), pi): the frustum test (not the size test, nor the
+// level of detail) pads the sphere by a + 2 (s + a) sin(psi / 2)
+uniform vec3 wind_pad;
 
 void main() {
     uint i = gl_GlobalInvocationID.x;
@@ -39,8 +45,15 @@ void main() {
     float ppu = pixel_scale;
     if (eye.w > 0.5) ppu = pixel_scale / max(distance(center, eye.xyz) - radius, 1e-4);
     if (frustum) {
+        float reach = radius;
+        if (wind_pad != vec3(0.0)) {
+            float s = length(sc.sphere.xyz) + sc.sphere.w;
+            float psi = min(wind_pad.x + wind_pad.y * s * (6.0 - 4.0 * s + s * s), 3.14159265);
+            float flutter = 3.0 * wind_pad.z * s * s * (0.5 + s);
+            reach += scale * (2.0 * (s + flutter) * sin(0.5 * psi) + flutter);
+        }
         for (int k = 0; k < 6; ++k)
-            if (dot(planes[k].xyz, center) + planes[k].w < -radius) return;
+            if (dot(planes[k].xyz, center) + planes[k].w < -reach) return;
         if (2.0 * radius * ppu < min_pixels) return;
     }
     int group = sc.lod_error[0] >= 1.0 ? 1 : 0;
