@@ -19,6 +19,16 @@
 // AOV_OUTPUTS entry of leafview/gpu/layout.py (leaf index + 1, view-space depth, world normal of
 // the visible side, (u, v)); LEAF_STEMS marks the stem program (leaf_baked.vert, no leaf index):
 // instance 0 and (u, v) 0, depth and normal written. Labels take the geometric normal (no relief).
+//
+// LEAF_CANOPY: the canopy look of leafview/gpu/canopy.py instead of the key + fill lights (numpy
+// twin: leafview/scene/leaf_light.py, which states the equations). The Light block's sun (with
+// LEAF_SHADOWS its visibility from the shadow maps, leaf_shadow.glsl) lights the side facing it and
+// shines through to the other side, tinted by the leaf (a back-lit leaf glows through its texture
+// and veins); the sky's spherical-harmonic irradiance (sky_model.glsl) is the ambient, from both
+// sides likewise (with LEAF_SSAO times the screen-space occlusion); the cuticle's gloss is the
+// specular lobe above, scaled by the Light block's gloss; tonemap.glsl encodes the result. With
+// alpha to coverage (light.flags.z, set on multisampled targets only) a textured leaf's alpha
+// becomes a one-pixel ramp around 0.5 (fwidth) written as the sample mask instead of a discard.
 #include "generated/frame_block.glsl"
 #include "color.glsl"
 
@@ -36,6 +46,17 @@ flat in ivec2 v_layers;
 flat in vec4 v_vein;        // vein layer (-1: no veins), world scale, detail, contrast (leaf_vein_lod.glsl)
 flat in vec2 v_vein_style;  // relief, major veins' width
 #include "leaf_veins.glsl"
+#endif
+#if defined(LEAF_CANOPY) && !defined(LEAF_AOV) && !defined(LEAF_DEPTH)
+#include "sky_model.glsl"
+#include "tonemap.glsl"
+#ifdef LEAF_SHADOWS
+#include "leaf_shadow.glsl"
+#endif
+#ifdef LEAF_SSAO
+layout(binding = SSAO_UNIT) uniform sampler2D ambient_occlusion;
+#endif
+float leaf_alpha = 1.0;   // the visible side's texture alpha (1: untextured), set by leaf_albedo
 #endif
 
 #ifdef LEAF_AOV
@@ -80,6 +101,9 @@ bool leaf_albedo(out vec3 albedo, out bool textured, bool veined) {
         vec4 texel = textureGrad(leaf_textures, vec3(st, float(layer)), st_dx, st_dy);
         albedo = srgb_to_linear(texel.rgb);
         textured = true;
+#if defined(LEAF_CANOPY) && !defined(LEAF_AOV) && !defined(LEAF_DEPTH)
+        leaf_alpha = texel.a;
+#endif
         return texel.a >= 0.5;
     }
 #endif
@@ -90,6 +114,58 @@ bool leaf_albedo(out vec3 albedo, out bool textured, bool veined) {
     albedo = mix(albedo, albedo * 1.35 + vec3(0.05), 0.6 * rib);
     return true;
 }
+
+#if defined(LEAF_CANOPY) && !defined(LEAF_AOV) && !defined(LEAF_DEPTH)
+// The tint of light that went through the leaf: albedo² scaled to the albedo's luminance (Rec. 709):
+// as bright as the light the leaf reflects (a leaf transmits about as much as it reflects in the
+// visible), deeper in colour (it crossed the pigments twice over); at most 1.
+vec3 backlight_tint(vec3 albedo) {
+    const vec3 lum = vec3(0.2126, 0.7152, 0.0722);
+    vec3 sq = albedo * albedo;
+    return min(sq * (dot(albedo, lum) / max(dot(sq, lum), 1e-8)), vec3(1.0));
+}
+
+// The sample mask of a fragment whose coverage is `coverage` (0..1): round(coverage × samples + dither)
+// samples, starting at a per-pixel rotation so that neighbouring pixels cover different samples
+// (alpha to coverage written by the shader: moderngl has no SAMPLE_ALPHA_TO_COVERAGE switch, and
+// a mask works the same on every OpenGL 4.5 driver).
+int coverage_mask(float coverage) {
+    int n = clamp(gl_NumSamples, 1, 31);
+    uint h = uint(gl_FragCoord.x) * 73856093u ^ uint(gl_FragCoord.y) * 19349663u;
+    h = (h ^ (h >> 13u)) * 0x5bd1e995u;
+    h ^= h >> 15u;
+    float dither = float(h & 255u) / 256.0;   // stochastic rounding: unbiased over pixels
+    int k = clamp(int(floor(coverage * float(n) + dither)), 0, n);
+    int bits = (1 << k) - 1;
+    int r = int((h >> 8u) % uint(n));
+    int rotated = r == 0 ? bits : (bits << r) | (bits >> (n - r));
+    return rotated & ((1 << n) - 1);
+}
+
+// The canopy look of the visible side (leaf_light.py: canopy_radiance): linear radiance before the
+// tone map. `n` the shading normal, `geo` the visible side's geometric normal.
+vec3 canopy_color(vec3 n, vec3 geo, vec3 view_dir, vec3 albedo, float translucency, float sheen, int lobe) {
+    vec3 l = light.sun.xyz;
+    float ndl = dot(n, l);
+    float through = light.tone.z * translucency;
+    vec3 tint = backlight_tint(albedo);
+    vec3 h = normalize(l + view_dir);
+    float spec = light.tone.w * sheen * spec_lobe(max(dot(n, h), 0.0), lobe) * step(0.0, ndl);
+    vec3 sun = max(ndl, 0.0) * albedo + through * max(-ndl, 0.0) * tint + vec3(spec);
+    float visible = 1.0;
+#ifdef LEAF_SHADOWS
+    // the side that faces the sun receives it (the offset along its normal moves toward the sun)
+    float depth = -(frame.view * vec4(v_world, 1.0)).z;
+    visible = sun_visibility(v_world, dot(geo, l) >= 0.0 ? geo : -geo, depth);
+#endif
+    float ao = 1.0;
+#ifdef LEAF_SSAO
+    ao = texelFetch(ambient_occlusion, ivec2(gl_FragCoord.xy), 0).r;
+#endif
+    vec3 ambient = sh_irradiance(n) * albedo + through * sh_irradiance(-n) * tint;
+    return light.sun.w * light.sun_colour.rgb * visible * sun + ao * ambient;
+}
+#endif
 
 #ifdef LEAF_AOV
 void main() {
@@ -132,6 +208,19 @@ void main() {
 #endif
 #ifdef LEAF_NO_TEXTURE
     leaf_albedo(albedo, textured, veined);
+#elif defined(LEAF_CANOPY)
+    bool opaque = leaf_albedo(albedo, textured, veined);
+    // a one-pixel ramp of the alpha around 0.5 (fwidth before any discard: the whole quad runs it)
+    float coverage = clamp((leaf_alpha - 0.5) / max(fwidth(leaf_alpha), 1e-4) + 0.5, 0.0, 1.0);
+    // every invocation writes the mask (an unwritten one is undefined once the shader assigns it)
+    int mask = -1;
+    if (light.flags.z != 0 && textured) {
+        mask = coverage_mask(coverage);
+        if (mask == 0) discard;
+    } else if (!opaque) {
+        discard;
+    }
+    gl_SampleMask[0] = mask;
 #else
     if (!leaf_albedo(albedo, textured, veined)) discard;
 #endif
@@ -155,6 +244,14 @@ void main() {
 #endif
 
     vec3 view_dir = frame.eye.w > 0.5 ? normalize(frame.eye.xyz - v_world) : -normalize(frame.eye.xyz);
+#ifdef LEAF_CANOPY
+#ifdef LEAF_STEMS
+    sheen = 0.02;   // bark: a faint broad sheen
+    lobe = 2;
+#endif
+    frag_color = vec4(canopy_output(canopy_color(n, visible_normal(), view_dir, albedo, translucency, sheen, lobe)),
+                      1.0);
+#else
     vec3 color = frame.ambient.rgb * albedo;
     if (frame.flags.y != 0) {
         color = albedo;
@@ -163,5 +260,6 @@ void main() {
         color += light_term(n, view_dir, frame.fill, albedo, translucency, 0.0, lobe);
     }
     frag_color = vec4(frame.flags.x != 0 ? linear_to_srgb(color) : color, 1.0);
+#endif
 }
 #endif

@@ -15,7 +15,9 @@ import pytest
 
 from leafview.app import hotreload
 from leafview.core.params import Bending, Jitter
+from leafview.deform.wind import WindSettings
 from leafview.gpu import layout
+from leafview.gpu.canopy import CanopyRenderer
 from leafview.gpu.instanced import BakedLeaves, InstancedLeaves
 from leafview.gpu.layout import (
     BINDINGS,
@@ -38,6 +40,7 @@ from leafview.gpu.scene import SceneRenderer
 from leafview.gpu.shaders import build_compute, preprocess
 from leafview.resources import shader_dir
 from leafview.scene.camera import scene_camera
+from leafview.scene.lighting import LightSettings
 from leafview.scene.spec import SceneSpec, build_scene
 from leafview.shapes import shapes_params
 
@@ -272,6 +275,10 @@ def built_programs(gl, presets, monkeypatch):
         assert scene.stems is not None
         with SceneRenderer(ctx, scene, resources=res) as s:
             s.render(scene_camera(scene, (32, 32)), (32, 32), samples=0)
+            # the canopy look: shadows, sky, ground, occlusion, wind (and the shadowed ground variant)
+            with CanopyRenderer(s, LightSettings(ssao=True), WindSettings(speed=4.0)) as c:
+                c.render(scene_camera(scene, (32, 32)), (32, 32), samples=0)
+            s.capture([0], defines={"LEAF_WIND": 1})
         hotreload.compile_check(ctx)   # the viewer's programs: leaf, overlay, imgui, reference photo (built and released)
         monkeypatch.undo()
         yield built

@@ -45,7 +45,7 @@ from leafview.deform.beam import BEND_SAMPLES, bend_profile
 from leafview.deform.fbm import RIPPLE_SAMPLES
 
 __all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "LIGHT_BLOCK", "SHADOW_BLOCK", "WIND_BLOCK",
-           "LIGHT_BINDING", "SHADOW_BINDING", "WIND_BINDING", "SHADOW_UNIT", "SSAO_UNIT", "SPECIES_CULL_BLOCK", "DRAW_COMMAND_DTYPE", "FBM_JOB_DTYPE",
+           "LIGHT_BINDING", "SHADOW_BINDING", "WIND_BINDING", "SHADOW_UNIT", "SSAO_UNIT", "SSAO_DEPTH_UNIT", "SSAO_NORMAL_UNIT", "SPECIES_CULL_BLOCK", "DRAW_COMMAND_DTYPE", "FBM_JOB_DTYPE",
            "Binding", "BINDINGS", "binding_defines", "bindings_glsl",
            "LEAF_BINDING", "FRAME_BINDING", "LEAVES_BINDING", "SIGNALS_BINDING", "SPECIES_OF_BINDING",
            "SPECIES_BINDING", "COMMANDS_BINDING", "VISIBLE_BINDING", "FBM_JOBS_BINDING", "READBACK_BINDING",
@@ -182,12 +182,15 @@ FRAME_BLOCK = Block(
 LIGHT_BLOCK = Block(
     "LightData", "Light",
     (
-        ("sun", "vec4", 1),          # xyz direction towards the sun (world, unit), w irradiance
-        ("sun_colour", "vec4", 1),   # rgb, w unused
-        ("sky_zenith", "vec4", 1),   # zenith radiance rgb, w 1: sky drawn
-        ("sky_horizon", "vec4", 1),  # horizon radiance rgb, w 1: ground drawn
+        ("sun", "vec4", 1),          # xyz direction towards the sun (world, unit), w folded irradiance (E/π)
+        ("sun_colour", "vec4", 1),   # rgb (luminance 1), w unused
+        ("sky_zenith", "vec4", 1),   # zenith radiance rgb (L_z c_z, leafview.scene.sky eq. 2), w 1: sky drawn
+        ("sky_horizon", "vec4", 1),  # horizon colour scale rgb (L_z c_h), w 1: ground drawn
+        ("sky_perez", "vec4", 2),    # [0] Perez A, B, C, D; [1] E, 1/F(0, θs), horizon haze k, unused
         ("ground", "vec4", 1),       # ground albedo rgb, w the ground's height (world z)
-        ("sky_sh", "vec4", 9),       # irradiance of sky and ground as 9 spherical-harmonic rgb coefficients
+        ("ground_radiance", "vec4", 1),  # radiance of the distant ground (sky eq. 3) rgb, w unused
+        ("sky_sh", "vec4", 9),       # folded irradiance (E/π) of sky and ground: 9 spherical-harmonic rgb
+                                     # coefficients, convolved (Â_l L_lm / π; sky_model.glsl sh_irradiance)
         ("tone", "vec4", 1),         # x 2^exposure, y tone map (0 linear, 1 filmic), z transmission, w gloss
         ("flags", "ivec4", 1),       # x shadows on, y ambient occlusion on, z alpha to coverage, w unused
     ),
@@ -199,7 +202,7 @@ SHADOW_BLOCK = Block(
     (
         ("matrices", "mat4", 4),     # world -> the sun's clip space, one per cascade
         ("splits", "vec4", 1),       # far end of each cascade (view-space distance along the optical axis)
-        ("params", "vec4", 1),       # x cascades, y depth bias, z normal offset (world), w 1 / map size
+        ("params", "vec4", 1),       # x cascades (0: no shadows), y depth bias, z normal offset (texels), w 1 / tile size
     ),
     "the sun's cascaded shadow maps (leafview/gpu/shadow.py)",
 )
@@ -208,8 +211,10 @@ WIND_BLOCK = Block(
     "WindData", "Wind",
     (
         ("wind", "vec4", 1),         # xy direction the wind blows towards (world, unit), z speed, w time
-        ("gust", "vec4", 1),         # wind helper's: gust and turbulence settings
-        ("flutter", "vec4", 1),      # wind helper's: blade flutter settings
+        ("gust", "vec4", 1),         # x load P_w, y λ (eq. 5), z 1 / gust length, w the gust's phase (samples)
+        ("flutter", "vec4", 1),      # x each leaf's sway phase, y flutter phase (samples), z flutter a_f, w unused
+        ("ids", "ivec4", 1),         # x seed of the leaves' phase hash
+        ("signal", "vec4", 64),      # the wind's fBm signal N (eqs 1-2), 256 samples, 4 a vec4
     ),
     "the wind of a frame (leafview.deform.wind)",
 )
@@ -258,8 +263,10 @@ VEIN_FIELD_UNIT = 4      # sampler leaf_vein_field: the vein fields (distance, o
 VEIN_GRID_UNIT = 5       # sampler leaf_vein_grid: the vein-shape grids (displacement, ripple coordinate)
 VEIN_STYLE_UNIT = 6      # sampler leaf_vein_style: venation contrast and relief, one texel per vein layer
 LOBE_UNIT = 7            # sampler leaf_lobe_table: the lobed leaves' sweep tables, one array layer per table
-SHADOW_UNIT = 8          # sampler sun_shadow: the sun's shadow map cascades (depth array texture)
+SHADOW_UNIT = 8          # sampler sun_shadow: the sun's shadow map cascades (one depth atlas texture, a tile per cascade)
 SSAO_UNIT = 9            # sampler ambient_occlusion: the frame's screen-space ambient occlusion
+SSAO_DEPTH_UNIT = 10     # sampler ssao_depth: the SSAO pass's view-space depth (its label pass)
+SSAO_NORMAL_UNIT = 11    # sampler ssao_normal: the SSAO pass's world normals (its label pass)
 LIGHT_BINDING = 14       # uniform Light: sun, sky, ground, tone (canopy frames)
 SHADOW_BINDING = 15      # uniform Shadow: the sun's cascade matrices
 WIND_BINDING = 16        # uniform Wind: the frame's wind
@@ -313,6 +320,8 @@ BINDINGS: tuple[Binding, ...] = (
     Binding("LOBE_UNIT", LOBE_UNIT, "sampler", LOBE_SAMPLER, "lobed leaves' sweep tables (leafview/gpu/lobe_tables.py)"),
     Binding("SHADOW_UNIT", SHADOW_UNIT, "sampler", "sun_shadow", "the sun's shadow cascades (leafview/gpu/shadow.py)"),
     Binding("SSAO_UNIT", SSAO_UNIT, "sampler", "ambient_occlusion", "screen-space ambient occlusion (leafview/gpu/ssao.py)"),
+    Binding("SSAO_DEPTH_UNIT", SSAO_DEPTH_UNIT, "sampler", "ssao_depth", "the SSAO pass's depth input (leafview/gpu/ssao.py)"),
+    Binding("SSAO_NORMAL_UNIT", SSAO_NORMAL_UNIT, "sampler", "ssao_normal", "the SSAO pass's normal input (leafview/gpu/ssao.py)"),
     Binding("LIGHT_BINDING", LIGHT_BINDING, "uniform", "Light", "sun, sky, ground, tone (leafview/gpu/canopy.py)"),
     Binding("SHADOW_BINDING", SHADOW_BINDING, "uniform", "Shadow", "the sun's cascades (leafview/gpu/shadow.py)"),
     Binding("WIND_BINDING", WIND_BINDING, "uniform", "Wind", "the frame's wind (leafview/gpu/wind.py)"),

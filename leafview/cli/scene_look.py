@@ -1,0 +1,102 @@
+"""The light options of ``leafview scene``: ``--shadows on|off``, ``--sun AZ,EL``, ``--sky on|off``,
+``--ground on|off``, ``--exposure EV``, ``--ssao on|off``, ``--tone filmic|linear``.
+
+Each option overrides the scene file's ``[light]`` table (:class:`~leafview.scene.lighting.LightSettings`),
+whose defaults apply to the rest. Values are checked while the command line is parsed, by the
+settings' own rules (one source for the ranges and the messages, which name ``light.sun[1]`` and
+so on): argparse reports a bad one and exits 2 before anything is built or rendered.
+
+Examples::
+
+    leafview scene --layout plant --leaves 3000 -o tree.png --sun 220,25 --exposure 0.5
+    leafview scene tree.toml -o flat.png --shadows off --sky off --ground off --tone linear
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Any
+
+from leafview.errors import ParamError
+from leafview.scene.lighting import TONE_MAPS, LightSettings
+
+__all__ = ["add_light_arguments", "light_from_args", "sun_angles", "exposure", "LIGHT_SWITCHES", "ON_OFF"]
+
+ON_OFF = ("on", "off")
+LIGHT_SWITCHES = ("shadows", "sky", "ground", "ssao")   # on|off options, named as LightSettings' fields
+_MAX_TEXT = 60
+
+
+def _checked(**changes: Any) -> LightSettings:
+    """LightSettings with ``changes`` over the defaults; a ParamError as argparse's type error."""
+    try:
+        return LightSettings(**changes)
+    except ParamError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def sun_angles(text: str) -> tuple[float, float]:
+    """``--sun AZ,EL``: azimuth (degrees counter-clockwise from +x) and elevation (degrees above the
+    horizon), checked as ``light.sun``."""
+    parts = text[:_MAX_TEXT + 1].split(",")
+    try:
+        if len(text) > _MAX_TEXT or len(parts) != 2:
+            raise ValueError(text)
+        az, el = (float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected AZ,EL (two numbers in degrees, e.g. 135,50), "
+                                         f"got {text[:_MAX_TEXT]!r}") from None
+    if not (math.isfinite(az) and math.isfinite(el)):
+        raise argparse.ArgumentTypeError(f"light.sun: {text[:_MAX_TEXT]!r} is not two finite numbers")
+    sun: tuple[float, float] = _checked(sun=(az, el)).sun
+    return sun
+
+
+def exposure(text: str) -> float:
+    """``--exposure EV``: stops (the image is scaled by 2^EV), checked as ``light.exposure``."""
+    try:
+        if len(text) > _MAX_TEXT:
+            raise ValueError(text)
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of stops, got {text[:_MAX_TEXT]!r}") from None
+    ev: float = _checked(exposure=x).exposure
+    return ev
+
+
+def add_light_arguments(p: argparse.ArgumentParser) -> None:
+    """The light options (an argument group); each defaults to None: the scene file's or the
+    default light."""
+    g = p.add_argument_group("light", "the canopy look (each overrides the scene file's [light] table)")
+    default = LightSettings()
+    g.add_argument("--shadows", choices=ON_OFF, help=f"sun shadows (default {_word(default.shadows)})")
+    g.add_argument("--sun", type=sun_angles, metavar="AZ,EL",
+                   help="sun azimuth (degrees counter-clockwise from +x) and elevation (0-90 degrees above the "
+                        f"horizon) (default {default.sun[0]:g},{default.sun[1]:g})")
+    g.add_argument("--sky", choices=ON_OFF, help=f"analytic sky behind the scene (default {_word(default.sky)})")
+    g.add_argument("--ground", choices=ON_OFF, help=f"ground plane under the scene (default {_word(default.ground)})")
+    g.add_argument("--exposure", type=exposure, metavar="EV",
+                   help=f"exposure in stops, the image scaled by 2^EV before tone mapping (default {default.exposure:g})")
+    g.add_argument("--ssao", choices=ON_OFF, help=f"screen-space ambient occlusion (default {_word(default.ssao)})")
+    g.add_argument("--tone", choices=TONE_MAPS, help=f"tone mapping (default {default.tone})")
+
+
+def _word(flag: bool) -> str:
+    return ON_OFF[0] if flag else ON_OFF[1]
+
+
+def light_from_args(args: argparse.Namespace, base: LightSettings | None = None) -> LightSettings:
+    """``base`` (the scene file's light; None: the defaults) with the options given on the command
+    line; raises :class:`ParamError` naming the field when a combination is refused."""
+    light = base if base is not None else LightSettings()
+    changes: dict[str, Any] = {}
+    for name in LIGHT_SWITCHES:
+        value = getattr(args, name, None)
+        if value is not None:
+            changes[name] = value == ON_OFF[0]
+    for name in ("sun", "exposure", "tone"):
+        value = getattr(args, name, None)
+        if value is not None:
+            changes[name] = value
+    return light.replace(**changes) if changes else light
