@@ -5,8 +5,17 @@ shows what the culling pass drew at each level of detail and toggles culling and
 :class:`~leafview.app.window.ViewerWindow` hosts it unchanged (``leafview scene --view``), and
 the tests drive it headless with injected imgui events.
 
-Mouse: left drag orbits, shift+left or middle drag pans, the wheel dollies. Keys: C culling,
-L level of detail, V veins, F frame the scene, Esc or Q quit.
+Mouse: left drag orbits, middle drag pans, the wheel dollies; a left click picks the leaf under
+the cursor (GPU picking by instance id, :mod:`leafview.gpu.picking`; shift+click adds it to the
+selection), a right drag or shift+left drag selects the leaves drawn inside a box. Keys: C
+culling, L level of detail, V veins, F frame the scene, Ctrl+Z undo, Ctrl+Y (or Ctrl+Shift+Z)
+redo, Esc or Q quit.
+
+Scene-wide edits (:mod:`leafview.scene.scene_edits`, the panel of
+:mod:`leafview.app.scene_edit_panel`) change the edited leaves' rows with one buffer write per
+batch (:func:`leafview.gpu.scene_edits.update_rows`); **Save** writes the scene file with its
+``[[edits]]``. Selected leaves are marked by a ring at their centre, drawn by imgui over the
+frame (at most :data:`MAX_MARKERS` of them, projected in numpy: no extra scene pass).
 """
 
 from __future__ import annotations
@@ -23,16 +32,22 @@ from numpy.typing import NDArray
 
 from leafview.app.imgui_gl import ImguiRenderer
 from leafview.app.orbit import OrbitCamera
+from leafview.app.scene_edit_panel import SceneEditPanel
 from leafview.app.viewer import begin_io
 from leafview.app.window import ViewerWindow
+from leafview.gpu.picking import pick, pick_box, project
 from leafview.gpu.scene import CullSettings, SceneRenderer
+from leafview.gpu.scene_edits import update_rows
 from leafview.gpu.targets import RenderTarget, read_rgba
+from leafview.scene.scene_edits import SceneEditor
 from leafview.scene.spec import Scene
 
 __all__ = ["SceneView", "view_scene"]
 
 PANEL_WIDTH = 300
 BACKGROUND = (0.62, 0.72, 0.80, 1.0)  # a pale sky behind the canopy
+MAX_MARKERS = 4000                     # selected leaves marked on screen
+CLICK_SLOP = 4.0                       # pixels a press may move and still be a click
 
 
 class _Quit:
@@ -63,7 +78,8 @@ class _State:
 class SceneView:
     """Scene + panel for one GL context (creates and releases its own imgui context)."""
 
-    def __init__(self, ctx: moderngl.Context, scene: Scene, *, veins: bool = True) -> None:
+    def __init__(self, ctx: moderngl.Context, scene: Scene, *, veins: bool = True,
+                 path: str | Path | None = None) -> None:
         self.ctx, self.scene = ctx, scene
         self.imgui_ctx: imgui.internal.Context | None = imgui.create_context()   # None once released
         imgui.get_io().set_ini_filename(None)
@@ -89,6 +105,16 @@ class SceneView:
         self._drag: str | None = None
         self._render_target: RenderTarget | None = None
         self.counts = np.zeros(len(self.renderer.command_grids), np.int64)   # lobed levels after the others
+        # scene-wide edits: the editor, its panel (Save writes ``path``) and the mouse's selection state
+        self.editor = SceneEditor(scene)
+        self.edit_panel = SceneEditPanel(self.editor, self._rows_changed, None if path is None else Path(path))
+        self._press: tuple[float, float] | None = None   # where a left or right press started
+        self._box: tuple[float, float, float, float] | None = None   # the box being drawn (window points)
+        self._view: tuple[int, int, float, float] = (1, 1, 1.0, 1.0)   # scene px size, points -> px scale
+
+    def _rows_changed(self, leaves: NDArray[np.int64]) -> None:
+        assert self.renderer is not None
+        update_rows(self.renderer, leaves)
 
     def _corners(self) -> NDArray[np.float64]:
         lo, hi = self.scene.bounds()
@@ -108,14 +134,16 @@ class SceneView:
             self.camera.reset(self._corners(), scene_w / h)
             self.camera.radius *= 2.0  # room to dolly out and a generous far plane
             self._framed = True
+        px_w = max(1, int(round(scene_w * fw / w)))
+        self._view = (px_w, fh, fw / w, fh / h)
         imgui.new_frame()
         self._input(io, scene_w, h)
         self._panel(w, h)
+        self._overlay()
         imgui.render()
         fbo = self._target(fw, fh)
         fbo.use()
         fbo.clear(*BACKGROUND, depth=1.0)
-        px_w = max(1, int(round(scene_w * fw / w)))
         self.ctx.viewport = (0, 0, px_w, fh)
         assert self.renderer is not None and self.gui is not None
         self.renderer.set_camera(self.camera.camera(px_w, fh), (px_w, fh))
@@ -147,22 +175,81 @@ class SceneView:
             self.camera.frame(self._corners(), scene_w / h)
         if pressed(imgui.Key.escape) or pressed(imgui.Key.q):
             self.files.request_quit()
+        if io.key_ctrl and pressed(imgui.Key.z):
+            (self.edit_panel.redo if io.key_shift else self.edit_panel.undo)()
+        if io.key_ctrl and pressed(imgui.Key.y):
+            self.edit_panel.redo()
         mx, my = io.mouse_pos.x, io.mouse_pos.y
         inside = 0 <= mx < scene_w and 0 <= my < h and not io.want_capture_mouse
+        left, right = imgui.MouseButton_.left, imgui.MouseButton_.right
         if self._drag is None and inside:
-            if imgui.is_mouse_clicked(imgui.MouseButton_.left):
-                self._drag = "pan" if io.key_shift else "orbit"
+            if imgui.is_mouse_clicked(left):
+                # a click (released within CLICK_SLOP) picks; a drag orbits, or with shift draws a box
+                self._drag, self._press = ("box" if io.key_shift else "orbit"), (mx, my)
+            elif imgui.is_mouse_clicked(right):
+                self._drag, self._press = "box", (mx, my)
             elif imgui.is_mouse_clicked(imgui.MouseButton_.middle):
                 self._drag = "pan"
             if io.mouse_wheel:
                 self.camera.dolly(float(io.mouse_wheel))
         if self._drag is not None:
-            if not (imgui.is_mouse_down(imgui.MouseButton_.left) or imgui.is_mouse_down(imgui.MouseButton_.middle)):
-                self._drag = None
-            elif self._drag == "orbit":
+            moved = self._press is not None and max(abs(mx - self._press[0]), abs(my - self._press[1])) > CLICK_SLOP
+            if not any(imgui.is_mouse_down(b) for b in (left, right, imgui.MouseButton_.middle)):
+                if self._press is not None and not moved and self._drag != "pan":
+                    self._click(self._press, add=bool(io.key_shift))
+                elif self._drag == "box" and self._box is not None:
+                    self._select_box(self._box, add=bool(io.key_shift))
+                self._drag, self._press, self._box = None, None, None
+            elif self._drag == "orbit" and moved:
                 self.camera.orbit(io.mouse_delta.x, io.mouse_delta.y)
-            else:
+            elif self._drag == "box" and moved and self._press is not None:
+                self._box = (self._press[0], self._press[1], min(mx, scene_w - 1), min(max(my, 0), h - 1))
+            elif self._drag == "pan":
                 self.camera.pan(io.mouse_delta.x, io.mouse_delta.y, h)
+
+    # -- selection ------------------------------------------------------------------------------
+    def _pixels(self, x: float, y: float) -> tuple[float, float]:
+        _, _, sx, sy = self._view
+        return x * sx, y * sy
+
+    def _click(self, at: tuple[float, float], add: bool) -> None:
+        """Pick the leaf drawn at window point ``at`` (label pass); select it (add: to the selection)."""
+        assert self.renderer is not None
+        px_w, fh, _, _ = self._view
+        leaf = pick(self.renderer, self.camera.camera(px_w, fh), (px_w, fh), *self._pixels(*at), self.settings)
+        if leaf is not None:
+            self.editor.select([leaf], add=add)
+            self.edit_panel.target = 2
+        elif not add:
+            self.editor.select(np.zeros(0, np.int64))
+
+    def _select_box(self, box: tuple[float, float, float, float], add: bool) -> None:
+        """Select the leaves drawn inside ``box`` (window points)."""
+        assert self.renderer is not None
+        px_w, fh, _, _ = self._view
+        x0, y0 = self._pixels(box[0], box[1])
+        x1, y1 = self._pixels(box[2], box[3])
+        leaves = pick_box(self.renderer, self.camera.camera(px_w, fh), (px_w, fh), (x0, y0, x1, y1), self.settings)
+        self.editor.select(leaves, add=add)
+        self.edit_panel.target = 2
+
+    def _overlay(self) -> None:
+        """The selection box being drawn and a ring on each selected leaf (imgui, over the frame)."""
+        dl = imgui.get_foreground_draw_list()
+        colour = imgui.get_color_u32(imgui.ImVec4(1.0, 0.85, 0.1, 1.0))
+        if self._box is not None:
+            x0, y0, x1, y1 = self._box
+            dl.add_rect(imgui.ImVec2(min(x0, x1), min(y0, y1)), imgui.ImVec2(max(x0, x1), max(y0, y1)), colour)
+        sel = self.editor.selection[:MAX_MARKERS]
+        if not sel.size or self.edit_panel.target != 2:
+            return
+        px_w, fh, sx, sy = self._view
+        m = self.scene.matrices[sel]
+        centre = m[:, :3, 3] + 0.5 * m[:, :3, 1]    # halfway along the leaf's axis (+y in leaf space)
+        xy, ok = project(self.camera.camera(px_w, fh), centre, (px_w, fh))
+        for (x, y), vis in zip(xy, ok):
+            if vis:
+                dl.add_circle(imgui.ImVec2(float(x) / sx, float(y) / sy), 4.0, colour, 0, 1.5)
 
     def _panel(self, w: int, h: int) -> None:
         assert self.renderer is not None
@@ -188,6 +275,8 @@ class SceneView:
         for k, ((nu, nv), c) in enumerate(zip(self.renderer.command_grids, self.counts)):
             imgui.text(f"  {nu}×{nv} grid{' (lobed)' if k >= lobed else ''}: {int(c):,}")
         imgui.text(f"triangles: {self.renderer.triangles(self.counts):,}")
+        imgui.separator()
+        self.edit_panel.draw()
         imgui.end()
 
     # -- framebuffers -------------------------------------------------------------------------------
@@ -224,10 +313,10 @@ class SceneView:
 
 
 def view_scene(scene: Scene, size: tuple[int, int] = (1280, 800), frames: int | None = None,
-               screenshot: str | Path | None = None, *, veins: bool = True) -> int:
+               screenshot: str | Path | None = None, *, veins: bool = True, path: str | Path | None = None) -> int:
     """Open ``scene`` in a window (blocks until closed), its veins shown or not (``veins``, the
-    panel's checkbox); returns the exit code."""
+    panel's checkbox); the edit panel's Save writes ``path`` (the scene file). Returns the exit code."""
 
     with ViewerWindow(None, size, title="leafview scene",
-                      make_view=lambda ctx: SceneView(ctx, scene, veins=veins)) as win:
+                      make_view=lambda ctx: SceneView(ctx, scene, veins=veins, path=path)) as win:
         return win.run(frames=frames, screenshot=screenshot)

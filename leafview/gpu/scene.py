@@ -100,6 +100,7 @@ from leafview.gpu.vein_draw import VeinDraw, fresh_layers
 from leafview.resources import resolve_preset
 from leafview.scene.camera import Camera, top_down
 from leafview.scene.spec import VBAR_GAP, Scene, SceneSpec
+from leafview.scene.variety import interpolate_bend, load_table, sphere_padding
 
 __all__ = ["LOD_GRIDS", "CullSettings", "SceneRenderer", "SceneLimitError", "pack_scene", "species_cull", "plan_batches",
            "frustum_planes", "cull_reference", "lobed_levels", "lobed_species", "LOD_NEVER"]
@@ -229,10 +230,15 @@ def _vec4_run(recs: NDArray[Any], members: Sequence[str]) -> NDArray[np.float32]
 def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
                species_records: NDArray[Any] | None = None, out: NDArray[Any] | None = None) -> NDArray[Any]:
     """LEAF_BLOCK rows of leaves ``start:stop``, vectorised: the species' record with Ω scaled by
-    the leaf's factors (as :func:`leafview.scene.spec.vary_shape`), colours by its tint and the
-    model matrix set. Derived members are filled later by the prepare pass on the GPU. ``out``:
-    records to write into (at least ``stop - start``; the first ones are returned), so that the
-    batches of a large scene reuse one host array.
+    the leaf's factors plus its offsets (``Scene.offsets``, scene-wide edits; as
+    :func:`leafview.scene.spec.vary_shape`), colours by its tint and the model matrix set, and its
+    variety (:mod:`leafview.scene.variety`): ripple amplitude P × its factor and phase θ + its
+    offset on both sides, and, for a species with a bend load range, the bend samples Δ, Φ
+    interpolated at its load factor between the species' solved loads
+    (:func:`~leafview.scene.variety.interpolate_bend`, the same numbers as
+    :func:`leafview.scene.spec.leaf_bend`). Derived members are filled later by the prepare pass
+    on the GPU. ``out``: records to write into (at least ``stop - start``; the first ones are
+    returned), so that the batches of a large scene reuse one host array.
 
     Rows are filled :data:`_PACK_CHUNK` at a time, so that each chunk's several passes run in
     the CPU's cache, and copied from the species' records as bytes (several times faster than
@@ -244,12 +250,16 @@ def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
     recs = np.empty(n, LEAF_BLOCK.dtype) if out is None else out[:n]
     row = np.dtype((np.void, LEAF_BLOCK.nbytes))
     source = np.ascontiguousarray(species_records).view(row)
+    loads = load_table(scene.species, scene.spec.varieties) if scene.load_scale is not None else None
+    p_max = np.float32(1.0)   # the ripple amplitude's hard maximum (leafview.scene.variety.leaf_ripple)
     for a in range(0, n, _PACK_CHUNK):
         b = min(a + _PACK_CHUNK, n)
         part = recs[a:b]
         np.take(source, scene.species_id[start + a:start + b], axis=0, out=part.view(row))
         omega = _vec4_run(part, _OMEGA_MEMBERS)[:, :, :3]
         omega *= scene.factors[start + a:start + b][:, _OMEGA_FACTORS].reshape(b - a, len(_OMEGA_MEMBERS), 3)
+        if scene.offsets is not None:   # scene-wide edits: Ω = species × factors + offsets
+            omega += scene.offsets[start + a:start + b][:, _OMEGA_FACTORS].reshape(b - a, len(_OMEGA_MEMBERS), 3)
         vbar = omega[:, _OMEGA_MEMBERS.index("vbar")]
         np.clip(vbar, np.float32(0.02), np.float32(0.98), out=vbar)
         for k in (1, 2):   # the feet stay in order, as vary_shape keeps them
@@ -259,7 +269,25 @@ def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
         np.clip(colours, np.float32(0.0), np.float32(1.0), out=colours)
         # rows 0-2 of each column: the last row keeps the species' texture and vein layers (LEAF_SLOTS)
         part["model"][:, :, :3] = np.transpose(scene.matrices[start + a:start + b, :3], (0, 2, 1))
+        _write_variety(scene, part, start + a, start + b, loads, p_max)
     return recs
+
+
+def _write_variety(scene: Scene, part: NDArray[Any], a: int, b: int, loads: Any, p_max: np.float32) -> None:
+    """Leaves ``a:b``'s variety into their rows ``part`` (see :func:`pack_scene`)."""
+    ripples = _vec4_run(part, ("ripple_l", "ripple_r"))    # (n, 2, 4): P, λ, k, θ of each side
+    if scene.ripple_scale is not None:
+        amp = ripples[:, :, 0]
+        amp *= scene.ripple_scale[a:b, None]
+        np.minimum(amp, p_max, out=amp)
+    if scene.ripple_phase is not None:
+        ripples[:, :, 3] += scene.ripple_phase[a:b, None]
+    if loads is not None and scene.load_scale is not None:
+        which, phi, delta = interpolate_bend(loads, scene.species_id[a:b], scene.load_scale[a:b])
+        if which.size:
+            bend = part["bend"]
+            bend[which, :, :3] = delta
+            bend[which, :, 3] = phi
 
 
 def _lod_error(params: Any, coarse: tuple[int, int], fine: tuple[int, int] = DEFAULT_GRID) -> float:
@@ -308,6 +336,7 @@ def species_cull(scene: Scene, grids: Sequence[tuple[int, int]] = LOD_GRIDS) -> 
         points = [np.stack([leaf_surface.evaluate(sp, *grid_uv(*g).astype(np.float64).T) for sp in swept])
                   for g in lgrids]
         out[lobed] = mark_lobed(cull_rows_from_points(points, lgrids, 0.0), len(lgrids))
+    out["sphere"][:, 3] += sphere_padding(scene.species, scene.spec.varieties, out["sphere"], scene.spec.variation)
     return out
 
 
@@ -601,6 +630,9 @@ class SceneRenderer:
                               {**feature_defines(recs), **vein_defines(recs), **lobe_defines(recs)},
                               block_limit=self._block_limit)
             out[mine] = mark_lobed(rows, len(grids)) if lobed else rows
+        # per-leaf variety (ripple amplitude, bend load) can carry a leaf beyond its species' sphere
+        out["sphere"][:, 3] += sphere_padding(self.scene.species, self.scene.spec.varieties, out["sphere"],
+                                              self.scene.spec.variation)
         return out
 
     def _defines(self) -> dict[str, int]:
@@ -802,17 +834,23 @@ class SceneRenderer:
             return self.lobed_grids[min(int(level), len(self.lobed_grids) - 1)]
         return self.grids[level]
 
-    def capture(self, leaves: Sequence[int], level: int = 0) -> NDArray[np.float32]:
+    def capture(self, leaves: Sequence[int], level: int = 0, *,
+                defines: Mapping[str, object] | None = None) -> NDArray[np.float32]:
         """Leaf-space positions that ``leaf.vert`` computes for the given leaves at ``level``'s
         grid (:meth:`capture_grid`: lobed leaves on their own) (transform feedback of the drawing
         program reading the vertex records that ``scene_compact.comp`` writes, one instanced
-        capture per batch): (len(leaves), nu·nv, 3). The framebuffer binding is left as it was."""
+        capture per batch): (len(leaves), nu·nv, 3). The framebuffer binding is left as it was.
+        ``defines``: the program variant of ``draw(defines=...)`` to capture (e.g. ``LEAF_WIND``,
+        whose leaves move; its blocks bound by the caller), with each batch's first leaf in
+        :data:`~leafview.gpu.layout.LEAF_OFFSET_UNIFORM` as a draw sets it."""
         picks = np.asarray(list(leaves), dtype=np.int64).reshape(-1)
         if picks.size and (picks.min() < 0 or picks.max() >= len(self.scene)):
             raise IndexError(f"leaf index out of range 0..{len(self.scene) - 1}")
         grid = self.resources.grid(*self.capture_grid(picks, level))
         nverts = grid.vertices
         order: list[NDArray[np.int64]] = []
+        program = self._variant(defines)[0] if defines else self.program
+        offset = program.get(LEAF_OFFSET_UNIFORM, None)
         self._bind_tables()
         with self.resources.capture.recording(picks.size * nverts) as rec:
             for b in self.batches:
@@ -828,8 +866,10 @@ class SceneRenderer:
                     commands = local.own(self.ctx.buffer(command.tobytes()))
                     vertices = local.own(self.ctx.buffer(reserve=LEAF_VERTEX_BLOCK.nbytes * mine.size))
                     self._compact(b.rows, commands, ids, vertices, int(mine.size), 1)
-                    vao = local.own(record_vertex_array(self.ctx, self.program, grid.vbo, vertices,
+                    vao = local.own(record_vertex_array(self.ctx, program, grid.vbo, vertices,
                                                         LEAF_VERTEX_BLOCK))
+                    if isinstance(offset, moderngl.Uniform):
+                        offset.value = b.start
                     b.use_rows()
                     rec.add(vao, nverts, instances=mine.size)
                 finally:

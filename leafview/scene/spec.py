@@ -20,6 +20,13 @@ Bending in scenes: the cantilever solve (Geng, Hu & Zhang 2014, eq. 4) runs once
 own rest frame, and every leaf of that species carries that droop (a per-leaf solve costs about a
 millisecond, too much for 10⁶ leaves). A leaf whose shape factors differ from 1 therefore droops
 like its species, not exactly as its own solve would give; :func:`bend_deviation` measures it.
+
+Per-leaf variety (Geng, Hu & Zhang 2014, sec. 6; :mod:`leafview.scene.variety`): a species' ``variety``
+table (``[[species]] variety = {...}``) sets ranges for its leaves' ripple phase offset, ripple
+amplitude factor and bend load factor. :func:`build_scene` draws them after every other number
+(``Scene.ripple_phase``, ``ripple_scale``, ``load_scale``; None when no species varies them). A
+leaf with a load factor is drawn with its species' profile interpolated at that load between the
+species' solves at a few loads (:func:`leaf_bend`), within 2e-4 leaf lengths of its own solve.
 """
 
 from __future__ import annotations
@@ -61,15 +68,25 @@ from leafview.core.params import (
     parse_params,
     transform_matrices,
 )
-from leafview.deform.beam import bend_profile
+from leafview.deform.beam import BendProfile, bend_profile
 from leafview.deform.surface import grid_uv, partials
 from leafview.deform.wind import WindSettings
 from leafview.resources import builtin_presets
 from leafview.scene.lighting import LightSettings
 from leafview.scene.plants import LEAVES_PER_PLANT, Placement, PlantSpec, scatter
+from leafview.scene.scene_edits import SceneEdit, apply_edits, parse_edits
+from leafview.scene.variety import (
+    Variety,
+    check_variety,
+    draw_variety,
+    interpolate_bend,
+    leaf_bending,
+    leaf_ripple,
+    load_table,
+)
 
 __all__ = ["SceneSpec", "Scene", "build_scene", "load_scene", "save_scene", "scene_from_leaves", "LAYOUTS", "VARIED",
-           "MAX_LEAVES", "vary_shape", "evaluate_leaf", "bend_deviation", "transform_matrices"]
+           "MAX_LEAVES", "vary_shape", "evaluate_leaf", "leaf_bend", "bend_deviation", "transform_matrices"]
 
 LAYOUTS = ("plant", "field", "hedge")
 # MAX_LEAVES and MAX_PLANTS: leafview.core.limits (with the memory check of SceneSpec)
@@ -104,6 +121,9 @@ class SceneSpec:
     name: str = ""
     light: LightSettings = field(default_factory=LightSettings)   # [light]: sun, sky, ground, tone
     wind: WindSettings = field(default_factory=WindSettings)      # [wind]: speed, direction, time
+    edits: tuple[SceneEdit, ...] = ()   # [[edits]]: scene-wide edits (leafview.scene.scene_edits), applied last
+    # per species (``[[species]] variety``): the ranges its leaves' ripple and bend load vary in
+    varieties: tuple[Variety, ...] = ()
 
     def __post_init__(self) -> None:
         if not self.species:
@@ -115,6 +135,16 @@ class SceneSpec:
             if not (math.isfinite(w) and w > 0):
                 raise ParamError(f"species[{i}].weight", f"must be a positive number, got {w!r}")
         object.__setattr__(self, "weights", tuple(float(w) for w in weights))
+        varieties = tuple(self.varieties)
+        if len(varieties) != len(self.species) and not any(isinstance(v, Variety) and v.active for v in varieties):
+            varieties = (Variety(),) * len(self.species)   # none set (e.g. the species replaced): the defaults
+        if len(varieties) != len(self.species):
+            raise ParamError("species", f"{len(varieties)} varieties for {len(self.species)} species")
+        for i, (leaf, v) in enumerate(zip(self.species, varieties)):
+            if not isinstance(v, Variety):
+                raise ParamError(f"species[{i}].variety", f"expected a Variety, got {type(v).__name__}")
+            check_variety(leaf, v, f"species[{i}].variety")
+        object.__setattr__(self, "varieties", tuple(varieties))
         if self.layout not in LAYOUTS:
             raise ParamError("scene.layout", f"unknown layout {self.layout!r} (use {', '.join(LAYOUTS)})")
         check_count("scene.leaves", self.leaves, 1, MAX_LEAVES)
@@ -133,6 +163,14 @@ class SceneSpec:
         if not isinstance(self.stems, bool):
             raise ParamError("scene.stems", f"must be true or false, got {self.stems!r}")
         self.plant_spec()  # validates [plant]
+        object.__setattr__(self, "edits", tuple(self.edits))
+        for i, e in enumerate(self.edits):
+            if not isinstance(e, SceneEdit):
+                raise ParamError(f"edits[{i}]", f"must be a SceneEdit, got {type(e).__name__}")
+            if e.target == "species" and e.species >= len(self.species):
+                raise ParamError(f"edits[{i}].species", f"species {e.species} out of range 0..{len(self.species) - 1}")
+            if e.target == "leaves" and e.leaves[-1] >= self.leaves:
+                raise ParamError(f"edits[{i}].leaves", f"leaf {e.leaves[-1]} out of range 0..{self.leaves - 1}")
 
     def plant_spec(self) -> PlantSpec:
         """The :class:`~leafview.scene.plants.PlantSpec` of ``[plant]`` (validated)."""
@@ -164,6 +202,9 @@ class SceneSpec:
 
         species = [{"weight": w, "leaf": compact_dict(leaf.replace(transform=Transform()), version=False)}
                    for leaf, w in zip(self.species, self.weights)]
+        for entry, variety in zip(species, self.varieties):
+            if variety.active:
+                entry["variety"] = variety.to_dict()
         out: dict[str, Any] = {"schema": SCENE_SCHEMA, "scene": scene, "species": species}
         if self.plant:
             out["plant"] = {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.plant.items()}
@@ -171,6 +212,8 @@ class SceneSpec:
             table = getattr(self, key).to_dict()
             if table:
                 out[key] = table
+        if self.edits:
+            out["edits"] = [e.to_dict() for e in self.edits]
         return out
 
     @classmethod
@@ -183,9 +226,10 @@ class SceneSpec:
         ``allow_outside``."""
         if not isinstance(data, Mapping):
             raise ParamError("", "expected a table at the top level")
-        unknown = set(data) - {"schema", "scene", "species", "plant", "light", "wind"}
+        unknown = set(data) - {"schema", "scene", "species", "plant", "light", "wind", "edits"}
         if unknown:
-            raise ParamError(sorted(unknown)[0], "unknown table (expected schema, scene, species, plant, light, wind)")
+            raise ParamError(sorted(unknown)[0],
+                             "unknown table (expected schema, scene, species, plant, light, wind, edits)")
         if data.get("schema") != SCENE_SCHEMA:
             raise ParamError("schema", f"expected schema = {SCENE_SCHEMA}, got {data.get('schema')!r}")
         scene = data.get("scene", {})
@@ -198,14 +242,14 @@ class SceneSpec:
         raw_species = data.get("species")
         if not isinstance(raw_species, list) or not raw_species:
             raise ParamError("species", "expected a non-empty list of [[species]] tables")
-        species, weights = [], []
+        species, weights, varieties = [], [], []
         for i, item in enumerate(raw_species):
             where = f"species[{i}]"
             if not isinstance(item, Mapping):
                 raise ParamError(where, "must be a table")
-            extra = set(item) - {"leaf", "preset", "weight"}
+            extra = set(item) - {"leaf", "preset", "weight", "variety"}
             if extra:
-                raise ParamError(f"{where}.{sorted(extra)[0]}", "unknown key (expected leaf, preset, weight)")
+                raise ParamError(f"{where}.{sorted(extra)[0]}", "unknown key (expected leaf, preset, weight, variety)")
             if ("leaf" in item) == ("preset" in item):
                 raise ParamError(where, "give exactly one of 'leaf' (a parameter table) or 'preset'")
             if "preset" in item:
@@ -216,11 +260,12 @@ class SceneSpec:
             if isinstance(weight, bool) or not isinstance(weight, (int, float)):
                 raise ParamError(f"{where}.weight", f"must be a positive number, got {weight!r}")
             weights.append(weight)
+            varieties.append(Variety.from_dict(item.get("variety", {}), f"{where}.variety"))
         plant = data.get("plant", {})
         if not isinstance(plant, Mapping):
             raise ParamError("plant", "must be a table")
         defaults = cls.__dataclass_fields__
-        return cls(species=tuple(species), weights=tuple(weights),
+        return cls(species=tuple(species), weights=tuple(weights), varieties=tuple(varieties),
                    layout=scene.get("layout", defaults["layout"].default),
                    leaves=scene.get("leaves", defaults["leaves"].default),
                    seed=scene.get("seed", defaults["seed"].default),
@@ -230,7 +275,8 @@ class SceneSpec:
                    stems=scene.get("stems", defaults["stems"].default),
                    plant=dict(plant), name=check_name(scene.get("name", ""), "scene.name"),
                    light=LightSettings.from_dict(data.get("light", {})),
-                   wind=WindSettings.from_dict(data.get("wind", {})))
+                   wind=WindSettings.from_dict(data.get("wind", {})),
+                   edits=parse_edits(data.get("edits", [])))
 
 
 def _species_leaf(table: Any, where: str) -> LeafParams:
@@ -324,25 +370,28 @@ def save_scene(spec: SceneSpec, path: str | os.PathLike[str]) -> None:
 VBAR_GAP = 1e-3   # smallest spacing of a varied leaf's first three silhouette feet v̄
 
 
-def vary_shape(shape: Shape, factors: NDArray[np.floating]) -> Shape:
-    """``shape`` with each Ω component of :data:`VARIED` multiplied by its factor; ``v̄`` clamped
-    to [0.02, 0.98] and kept increasing (each row at least :data:`VBAR_GAP` above the one before,
-    so a varied leaf is a valid leaf: it saves and reads back). The vectorised twin for GPU records is
-    :func:`leafview.gpu.scene.pack_scene` (a test checks they agree)."""
+def vary_shape(shape: Shape, factors: NDArray[np.floating], offsets: NDArray[np.floating] | None = None) -> Shape:
+    """``shape`` with each Ω component of :data:`VARIED` multiplied by its factor and, with
+    ``offsets`` (a scene-wide edit's additions, :mod:`leafview.scene.scene_edits`), that offset
+    added; ``v̄`` clamped to [0.02, 0.98] and kept increasing (each row at least :data:`VBAR_GAP`
+    above the one before, so a varied leaf is a valid leaf: it saves and reads back). The
+    vectorised twin for GPU records is :func:`leafview.gpu.scene.pack_scene` (a test checks they
+    agree)."""
     f = np.asarray(factors, np.float64)
-    a1 = _vec3(np.asarray(shape.a1) * f[0:3])
-    a2 = _vec3(np.asarray(shape.a2) * f[3:6])
+    o = np.zeros(len(VARIED)) if offsets is None else np.asarray(offsets, np.float64)
+    a1 = _vec3(np.asarray(shape.a1) * f[0:3] + o[0:3])
+    a2 = _vec3(np.asarray(shape.a2) * f[3:6] + o[3:6])
     rows: list[Vec3] = []
     for k, (vb, xs, zs) in enumerate(shape.silhouette[:3]):
-        g = f[6 + 3 * k: 9 + 3 * k]
-        v = float(np.clip(vb * g[0], 0.02, 0.98))
+        g, d = f[6 + 3 * k: 9 + 3 * k], o[6 + 3 * k: 9 + 3 * k]
+        v = float(np.clip(vb * g[0] + d[0], 0.02, 0.98))
         if rows:   # the rows' feet stay in order: a row varied past the one above it stops VBAR_GAP above it
             v = max(v, rows[-1][0] + VBAR_GAP)
-        rows.append((v, float(xs * g[1]), float(zs * g[2])))
+        rows.append((v, float(xs * g[1] + d[1]), float(zs * g[2] + d[2])))
     rows += [(r[0], r[1], r[2]) for r in shape.silhouette[3:]]
     # rows beyond the paper's three (an extended silhouette) keep their species' values
-    zf = tuple(float(x) for x in np.asarray(shape.zf[:3]) * f[15:18]) + tuple(shape.zf[3:])
-    zg = tuple(float(x) for x in np.asarray(shape.zg[:3]) * f[18:21]) + tuple(shape.zg[3:])
+    zf = tuple(float(x) for x in np.asarray(shape.zf[:3]) * f[15:18] + o[15:18]) + tuple(shape.zf[3:])
+    zg = tuple(float(x) for x in np.asarray(shape.zg[:3]) * f[18:21] + o[18:21]) + tuple(shape.zg[3:])
     return replace(shape, a1=a1, a2=a2, silhouette=tuple(rows), zf=zf, zg=zg)
 
 
@@ -391,8 +440,9 @@ class Scene:
 
     @property
     def varied(self) -> bool:
-        """Whether leaves differ from their species (shape or colour)."""
-        return self.spec.variation > 0 or self.spec.colour_variation > 0
+        """Whether leaves differ from their species (shape, colour, or variety: ripple, bend load)."""
+        return (self.spec.variation > 0 or self.spec.colour_variation > 0 or self.ripple_phase is not None
+                or self.ripple_scale is not None or self.load_scale is not None)
 
     @property
     def shape_ids(self) -> NDArray[np.int32]:
@@ -408,14 +458,23 @@ class Scene:
 
     def leaf(self, i: int) -> LeafParams:
         """Leaf ``i``'s own parameters in its leaf space (identity transform; place it with
-        ``matrices[i]``). Its bending is the species' (see the module docstring)."""
+        ``matrices[i]``). Its ripple and bend load carry its variety (:mod:`leafview.scene.variety`);
+        its bend is drawn from its species' profile (or, with a load range, interpolated between
+        its species' solved loads: :func:`leaf_bend`), see the module docstring."""
         sp = self.species[int(self.species_id[i])]
         t = float(self.tint[i])
         mat = sp.material
         mat = replace(mat, front=_tinted(mat.front, t), back=_tinted(mat.back, t))
         # a lobed leaf's Ω is not its shape (its sweep table is): it keeps its species' (build_scene)
-        shape = sp.shape if sp.lobes.enabled else vary_shape(sp.shape, self.factors[i])
-        return sp.replace(shape=shape, material=mat, name=f"{sp.name or 'leaf'}_{i}")
+        shape = sp.shape if sp.lobes.enabled else vary_shape(
+            sp.shape, self.factors[i], None if self.offsets is None else self.offsets[i])
+        ripple, bending = sp.ripple, sp.bending
+        if self.ripple_phase is not None or self.ripple_scale is not None:
+            ripple = leaf_ripple(ripple, 0.0 if self.ripple_phase is None else float(self.ripple_phase[i]),
+                                 1.0 if self.ripple_scale is None else float(self.ripple_scale[i]))
+        if self.load_scale is not None:
+            bending = leaf_bending(bending, float(self.load_scale[i]))
+        return sp.replace(shape=shape, material=mat, ripple=ripple, bending=bending, name=f"{sp.name or 'leaf'}_{i}")
 
     def placed_leaf(self, i: int) -> LeafParams:
         """Leaf ``i`` as a stand-alone leaf: :meth:`leaf` with ``matrices[i]`` as its transform and
@@ -481,8 +540,13 @@ def build_scene(spec: SceneSpec) -> Scene:
     if spec.colour_variation > 0:
         tint = (1.0 + spec.colour_variation * rng.uniform(-1.0, 1.0, n)).astype(np.float32)
     species = tuple(s.replace(transform=Transform()) for s in spec.species)
-    return Scene(spec, species, species_id.astype(np.int32), factors, tint,
-                 np.asarray(placement.matrices, np.float64), placement.stems, placement)
+    # per-leaf variety: drawn after every other number, so scenes without it keep theirs
+    ripple_phase, ripple_scale, load_scale = draw_variety(rng, species_id, spec.varieties)
+    scene = Scene(spec, species, species_id.astype(np.int32), factors, tint,
+                  np.asarray(placement.matrices, np.float64), placement.stems, placement,
+                  ripple_phase=ripple_phase, ripple_scale=ripple_scale, load_scale=load_scale)
+    apply_edits(scene, spec.edits)   # the scene-wide edits, last (leafview.scene.scene_edits)
+    return scene
 
 
 def scene_from_leaves(leaves: Sequence[LeafParams], name: str = "") -> Scene:
@@ -517,8 +581,8 @@ def _unplaced(leaf: LeafParams, identity: Transform) -> LeafParams:
 
 def evaluate_leaf(scene: Scene, i: int, u: NDArray[np.floating], v: NDArray[np.floating]) -> NDArray[np.float64]:
     """Leaf-space points of leaf ``i`` as the scene draws it: its own shape, jitter and ripples,
-    bent by its species' cantilever profile and shaped by its species' vein grid (the numpy
-    reference of the GPU rows). A lobed leaf: its swept surface
+    bent by its species' cantilever profile (:func:`leaf_bend`) and shaped by its species' vein
+    grid (the numpy reference of the GPU rows). A lobed leaf: its swept surface
     (:func:`leafview.botany.leaf_surface.evaluate`, ``u, v`` on its lobed grid)."""
 
     own = scene.leaf(int(i))
@@ -526,14 +590,33 @@ def evaluate_leaf(scene: Scene, i: int, u: NDArray[np.floating], v: NDArray[np.f
     if sp.lobes.enabled:
         return leaf_surface.evaluate(own, u, v)
     grid = shape_grid(sp)   # every leaf of a species reads its species' vein grid (one field layer each)
-    if not own.bending.active:
+    if not sp.bending.active:
         return partials(own, u, v, vein_grid=grid).L
-    return partials(own.replace(bending=Bending()), u, v, bend=bend_profile(sp), vein_grid=grid).L
+    return partials(own.replace(bending=Bending()), u, v, bend=leaf_bend(scene, int(i)), vein_grid=grid).L
+
+
+def leaf_bend(scene: Scene, i: int) -> BendProfile:
+    """The bend profile leaf ``i`` is drawn with: its species' (Geng, Hu & Zhang 2014, eq. 4, solved
+    once per species), or, when its species has a bend load range, the profile interpolated at the
+    leaf's load factor between the species' solved loads (:func:`leafview.scene.variety.interpolate_bend`;
+    axis and twist do not depend on the load)."""
+    sp = scene.species[int(scene.species_id[i])]
+    profile = bend_profile(sp)
+    if scene.load_scale is None:
+        return profile
+    table = load_table(scene.species, scene.spec.varieties)
+    if table is None:
+        return profile
+    which, phi, delta = interpolate_bend(table, scene.species_id[i:i + 1], scene.load_scale[i:i + 1])
+    if not which.size:
+        return profile
+    return BendProfile(profile.axis.copy(), phi[0], delta[0], profile.twist)
 
 
 def bend_deviation(scene: Scene, sample: Sequence[int]) -> float:
-    """Largest distance (in leaf lengths) between a bent leaf with its own cantilever solve and
-    with its species' profile (what the GPU draws), over the leaves in ``sample``."""
+    """Largest distance (in leaf lengths) between a bent leaf with its own cantilever solve (its
+    own shape and load) and with the profile it is drawn with (:func:`leaf_bend`: its species', or
+    interpolated at its load factor), over the leaves in ``sample``."""
 
     uv = grid_uv(9, 17).astype(np.float64)
     worst = 0.0
