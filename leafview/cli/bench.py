@@ -1,4 +1,4 @@
-"""``leafview bench [core|scene|export|shapes|dataset|capture|fit|veins|peers|all] [--json] [--quick]``: the benchmark
+"""``leafview bench [core|scene|canopy|export|shapes|dataset|capture|fit|veins|peers|all] [--json] [--quick]``: the benchmark
 tables of :mod:`leafview.bench`, measured in this process (also run by ``python bench/run_bench.py``);
 ``peers`` draws the same leaves with PyVista and pygfx as well (optional: ``leafview[peers]``), each
 in a worker process of its own, and is left out of ``all``.
@@ -26,6 +26,7 @@ SUITES: dict[str, str] = {
     "core": "leafview.bench.core",       # thumbnails, instancing, ripples, viewer edit latency
     "export": "leafview.bench.export",   # export time and file size per leaf
     "scene": "leafview.bench.scene",     # large scenes: frame times, culling and level of detail
+    "canopy": "leafview.bench.canopy",   # the canopy look: shadows' cost and effect, wind
     "shapes": "leafview.bench.shapes",   # botanical leaves generated, fitted and drawn per second
     "dataset": "leafview.bench.dataset", # dataset images per second, 1 worker against 2 (local engine)
     "capture": "leafview.bench.capture", # fitting point clouds and capturing a plant from RGB-D views

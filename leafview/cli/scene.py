@@ -1,11 +1,17 @@
 """``leafview scene``: build a scene of many leaves, render it offscreen, save it, or view it.
 
+Images are drawn with the canopy look (:class:`~leafview.gpu.canopy.CanopyRenderer`: sun and
+shadows, sky, ground, tone mapping; ``--shadows/--sun/--sky/--ground/--exposure/--ssao/--tone``
+and the scene file's ``[light]`` table) in the wind of ``--wind/--wind-dir/--time`` (``[wind]``).
+
 Examples::
 
     leafview scene --leaves 20000 --species ovate,lanceolate --seed 3 -o field.png
     leafview scene --layout plant --leaves 3000 --save tree.toml
     leafview scene tree.toml -o tree.png --camera ground --size 1280x720
     leafview scene tree.toml --view            # interactive window
+    leafview scene tree.toml --sun 200,25 --exposure 0.5 -o dusk.png
+    leafview scene tree.toml --wind 6 --frames 120 -o anim.mp4      # or anim.gif, or frames/
     leafview scene --leaves 40 --layout plant --views 8 --depth-noise 0.005 --holes -o views/
 
 ``--views N -o DIR`` writes synthetic RGB-D views with exact ground truth instead of one picture
@@ -37,6 +43,14 @@ from leafview.cli.args import (
     veins_off,
 )
 from leafview.cli.render import add_views_arguments, check_views_arguments, write_views
+from leafview.cli.scene_anim import (
+    add_wind_arguments,
+    animation_times,
+    check_animation_output,
+    wind_from_args,
+    write_animation,
+)
+from leafview.cli.scene_look import add_light_arguments, light_from_args
 from leafview.core.compact import is_compact
 from leafview.core.io import leaves_from_document, read_document, save_leaves
 from leafview.core.limits import MAX_PLANTS, MAX_VIEW_FRAMES
@@ -46,6 +60,7 @@ from leafview.export import export_scene
 from leafview.export import format_of as mesh_format
 from leafview.export.images import format_of, write_image
 from leafview.gpu import default_renderer
+from leafview.gpu.canopy import CanopyRenderer
 from leafview.gpu.scene import LOD_GRIDS, CullSettings, SceneRenderer
 from leafview.resources import builtin_presets, resolve_preset
 from leafview.scene.camera import SCENE_VIEWS, scene_camera
@@ -107,7 +122,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--variation", type=_fraction, help="± fraction each leaf's shape varies (default 0.2)")
     p.add_argument("--no-stems", action="store_true", help="leaves only, no branches")
     p.add_argument("-o", "--output", type=output_path, metavar="IMAGE|DIR",
-                   help="render to this image (.png, .tif, .exr); with --views, the folder of the views")
+                   help="render to this image (.png, .tif, .exr); with --frames N, an animation (.mp4, .gif, "
+                        "or a folder of PNG frames); with --views, the folder of the views")
     p.add_argument("--size", type=image_size, default=(1024, 768), metavar="WxH", help="image size (default 1024x768)")
     p.add_argument("--camera", choices=SCENE_VIEWS, default=None, help=f"camera (default {DEFAULT_CAMERA})")
     p.add_argument("--no-cull", action="store_true", help="draw every leaf (no frustum or size culling)")
@@ -117,8 +133,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--export", type=output_path, metavar="FILE",
                    help="bake the scene to a mesh file (.glb, .gltf, .usda, .usdc)")
     add_veins_argument(p)
+    add_light_arguments(p)
+    add_wind_arguments(p)
     p.add_argument("--view", action="store_true", help="open the scene in a window (orbit, culling/LOD panel)")
-    p.add_argument("--frames", type=_frames, metavar="N", help="with --view: draw N frames, then close (scripted runs)")
+    p.add_argument("--frames", type=_frames, metavar="N",
+                   help="with -o anim.mp4|anim.gif|DIR/: render N frames of the wind, --fps apart; with --view: "
+                        "draw N frames, then close (scripted runs)")
     p.add_argument("--screenshot", type=output_path, metavar="IMAGE",
                    help="with --view: write the window after the last frame")
     add_views_arguments(p)
@@ -142,14 +162,21 @@ def spec_from_args(args: argparse.Namespace) -> SceneSpec:
                 raise UsageError(f"--species: {name!r} is not a preset file or built-in name "
                                  f"(built-in: {builtin_names()})")
             species.append(LeafParams.load(path))
-        changes.update(species=tuple(species), weights=())
+        changes.update(species=tuple(species), weights=(), varieties=())
     for key in ("leaves", "layout", "seed", "plants", "variation"):
         value = getattr(args, key)
         if value is not None:
             changes[key] = value
     if args.no_stems:
         changes["stems"] = False
-    return spec.replace(**changes) if changes else spec
+    spec = spec.replace(**changes) if changes else spec
+    return with_look(spec, args)
+
+
+def with_look(spec: SceneSpec, args: argparse.Namespace) -> SceneSpec:
+    """``spec`` with the light and wind options of ``args`` over its ``[light]`` and ``[wind]``."""
+    light, wind = light_from_args(args, spec.light), wind_from_args(args, spec.wind)
+    return spec if (light, wind) == (spec.light, spec.wind) else spec.replace(light=light, wind=wind)
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -162,12 +189,17 @@ def _check_outputs(args: argparse.Namespace) -> None:
     args.camera = args.camera or DEFAULT_CAMERA
     if not (args.output or args.save or args.export or args.view):
         raise UsageError("nothing to do: give -o IMAGE, --save FILE, --export FILE, --view or --views N -o DIR")
-    if (args.frames is not None or args.screenshot) and not args.view:
-        raise UsageError("--frames and --screenshot go with --view")
+    if args.screenshot and not args.view:
+        raise UsageError("--screenshot goes with --view")
+    if args.frames is not None and not (args.view or args.output):
+        raise UsageError("--frames goes with -o anim.mp4|anim.gif|DIR/ (an animation) or with --view")
     if args.frames is not None and args.frames < 1:
         raise UsageError(f"--frames must be at least 1, got {args.frames}")
-    if args.output and format_of(Path(args.output)) is None:
-        raise UsageError(f"-o {args.output}: unknown image type (use .png, .tif or .exr)")
+    if args.output and args.frames is not None and not args.view:
+        check_animation_output(args.output, args.frames)   # unknown type or unwritable place: exit 2 now
+    elif args.output and format_of(Path(args.output)) is None:
+        raise UsageError(f"-o {args.output}: unknown image type (use .png, .tif or .exr; with --frames N, "
+                         ".mp4, .gif or a folder)")
     if args.save and Path(args.save).suffix.lower() not in (".toml", ".json"):
         raise UsageError(f"--save {args.save}: use a .toml or .json file name")
     if args.export:
@@ -175,7 +207,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
     seen: dict[str, str] = {}
     for flag, value in (("-o", args.output), ("--save", args.save), ("--export", args.export),
                         ("--screenshot", args.screenshot)):
-        if value:
+        if value and not (flag == "-o" and args.frames is not None and not args.view):
             refuse_directory(flag, value)   # every target checked before any work
             key = os.path.abspath(value)
             if key in seen:
@@ -216,7 +248,8 @@ def run(args: argparse.Namespace) -> int:
     leaves = _leaf_set(args)
     if leaves is not None:            # a leaf set: explicit placed leaves, drawn as they are
         scene = scene_from_leaves(leaves, name=Path(args.scene).name)
-        spec = scene.spec
+        spec = with_look(scene.spec, args)
+        scene = dataclasses.replace(scene, spec=spec)
     else:
         spec = spec_from_args(args)   # every input is validated before anything is written
         scene = build_scene(spec)
@@ -235,8 +268,11 @@ def run(args: argparse.Namespace) -> int:
     for line in wrote:
         say(line)
     if args.view:
+        # the edit panel's Save writes the recipe: to --save's file, else back to the scene file opened
+        recipe = None if leaves is not None else (args.save if args.save and not args.save.lower().endswith(
+            ".leaves.json") else args.scene)
         return view_scene(saved, size=args.size, frames=args.frames, screenshot=args.screenshot,
-                          veins=not veins_off(args))
+                          veins=not veins_off(args), path=recipe)
     return EXIT_OK
 
 
@@ -264,19 +300,43 @@ def _write_outputs(args: argparse.Namespace, scene: Scene, saved: Scene, spec: S
             renderer = SceneRenderer(ctx, scene, progress=bar.update)
         finally:
             bar.close()
+        camera = scene_camera(scene, args.size, args.camera)
+        animation = args.frames is not None and not args.view
         try:
             t_upload = time.perf_counter() - t1
             settings = CullSettings(cull=not args.no_cull, lod=not args.no_lod)
             t2 = time.perf_counter()
-            image = renderer.render(scene_camera(scene, args.size, args.camera), args.size, settings)
+            with CanopyRenderer(renderer, spec.light, spec.wind) as canopy:
+                if animation:
+                    _animate(args, canopy, camera, settings, spec)
+                else:
+                    image = canopy.render(camera, args.size, settings)
             t_frame = time.perf_counter() - t2
             counts = renderer.level_counts()
             tris = renderer.triangles(counts)
         finally:
             renderer.release()
-        write_image(args.output, image, description=f"leafview scene: {len(scene):,} leaves, seed {spec.seed}")
         drawn = int(counts.sum())
+        if animation:
+            say(f"wrote {args.output} ({args.size[0]}×{args.size[1]}, {args.frames} frames at {args.fps:g} fps, "
+                f"wind {spec.wind.speed:g}): {len(scene):,} leaves, {drawn:,} drawn in the last frame; "
+                f"build {t_build:.1f} s, upload {t_upload:.1f} s, frames {t_frame:.1f} s "
+                f"[{ctx.info['GL_RENDERER']}]")
+            return
+        write_image(args.output, image, description=f"leafview scene: {len(scene):,} leaves, seed {spec.seed}")
         say(f"wrote {args.output} ({args.size[0]}×{args.size[1]}, {args.camera} camera): {len(scene):,} leaves, "
             f"{drawn:,} drawn (levels {'/'.join(str(int(c)) for c in counts)}), {tris:,} triangles; "
             f"build {t_build:.1f} s, upload {t_upload:.1f} s, frame {t_frame:.2f} s "
             f"[{ctx.info['GL_RENDERER']}]")
+
+
+def _animate(args: argparse.Namespace, canopy: CanopyRenderer, camera: Any, settings: CullSettings,
+             spec: SceneSpec) -> None:
+    """``--frames N -o anim.mp4|anim.gif|DIR/``: N frames of the scene's wind from ``--time``,
+    ``1 / --fps`` apart, with a progress bar."""
+    wind = spec.wind
+    times = animation_times(wind.time, args.frames, args.fps)
+    with progress_bar(total=args.frames, unit="frame", desc="rendering", quiet=args.quiet, leave=False) as bar:
+        write_animation(args.output, args.frames, args.fps,
+                        lambda t: canopy.render(camera, args.size, settings, wind=wind.replace(time=t)),
+                        times=times, progress=bar.update)
