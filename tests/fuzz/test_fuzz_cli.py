@@ -220,7 +220,12 @@ def scene_args(draw: st.DrawFn) -> tuple[list[str], bool]:
                              ["-1", "18446744073709551616", "99999999999999999999999", "x", "1.5"]),
                             ("--plants", ["1", "2"], ["0", "-1", "x", "1e400"]),
                             ("--variation", ["0", "0.2", "0.5"], ["0.6", "-0.1", "nan", "x"]),
-                            ("--layout", ["plant", "field", "hedge"], ["forest", ""])):
+                            ("--layout", ["plant", "field", "hedge"], ["forest", ""]),
+                            # the canopy look and the wind (leafview.scene.lighting, leafview.deform.wind)
+                            ("--sun", ["135,50", "0,0", "-180,90"], ["10,95", "x", "nan,1", "1", "400,10"]),
+                            ("--shadows", ["on", "off"], ["maybe", ""]),
+                            ("--exposure", ["0", "-2.5"], ["nan", "11", "x"]),
+                            ("--wind", ["0", "8"], ["-1", "61", "nan", "inf"])):
         choice = draw(st.integers(0, 8))
         if choice in (1, 2):
             args += [flag, draw(st.sampled_from(good))]
@@ -365,7 +370,8 @@ OPTIONS = {
     "export": ["-o", "--format", "--resolution", "--backend", "--length-m", "--up", "--back-faces", "--instancing",
                "--digits", "-q"],
     "scene": ["--leaves", "--species", "--layout", "--seed", "--plants", "--variation", "--no-stems", "-o", "--size",
-              "--camera", "--no-cull", "--no-lod", "--save", "--export", "-q", "--frames", "--screenshot"],
+              "--camera", "--no-cull", "--no-lod", "--save", "--export", "-q", "--frames", "--screenshot", "--sun",
+              "--shadows", "--sky", "--ground", "--exposure", "--ssao", "--wind", "--time", "--fps"],
     "shapes": ["-o", "--names", "--sheet", "--size", "--view", "--lobed", "-q"],
     "morph": ["--ref", "--frames", "-o", "--size", "--view", "--method", "--fast", "--presets", "-q"],
     "presets": ["--help", "-q", "x"],
