@@ -74,6 +74,21 @@ def test_example_big_scene(gl, tmp_path) -> None:
     assert (image[..., 3] > 0).mean() > 0.2          # the field covers the lower part of the frame
 
 
+def test_example_canopy_edits(gl, tmp_path) -> None:
+    from leafview.scene.spec import load_scene
+
+    result = _run(["examples/canopy_edits.py", str(tmp_path), "--leaves", "600", "--size", "160x120"])
+    assert "edits ['width']" in result.stdout and "1 buffer write(s)" in result.stdout, result.stdout
+    noon, _ = read_image(tmp_path / "plant_noon.png")
+    evening, _ = read_image(tmp_path / "plant_evening_wind.png")
+    assert noon.shape == evening.shape == (120, 160, 4)
+    assert (noon[..., 3] == 255).all()                 # sky and ground behind the plant
+    assert np.abs(noon.astype(int) - evening.astype(int)).mean() > 3   # another sun, another instant
+    spec = load_scene(tmp_path / "plant.toml")
+    assert [e.op for e in spec.edits] == ["width"] and spec.light.sun == (200.0, 18.0)
+    assert spec.wind.speed == 6.0 and spec.varieties[0].bend_load == (0.7, 1.3)
+
+
 def test_example_export_leaf(gl, tmp_path) -> None:
     result = _run(["examples/export_leaf.py", str(tmp_path), "holly"])
     glb, usda, compact = (tmp_path / name for name in ("holly.glb", "holly.usda", "holly.leaf.json"))
