@@ -385,3 +385,32 @@ def test_opening_a_compound_file_shows_it_as_one_lobed_leaf(maple_viewer):
     mask = _leaf_mask(img, v)
     assert mask.sum() > 0.02 * mask.size and not (mask[0].any() or mask[-1].any() or mask[:, 0].any())
     assert sum(n.startswith("tip:") for n in v.overlay.handle_names) == 2
+
+
+def test_wind_moves_the_leaf_live_and_speed_0_is_the_still_frame(viewer):
+    from leafview.gpu.wind import WindUniforms
+
+    view = viewer.state.view
+    assert view.wind.speed == 0.0 and view.wind_playing
+    still = scene(frame(viewer, n=2), viewer)
+    assert view.wind.time == 0.0                                       # a still wind does not advance
+    view.wind = view.wind.replace(speed=8.0)
+    first = scene(frame(viewer), viewer)
+    t = view.wind.time
+    assert abs(t - 1 / 60) < 1e-6                                      # the frame's interval
+    assert isinstance(viewer.wind_uniforms, WindUniforms) and viewer.wind_uniforms.wind == view.wind
+    uploads = viewer.renderer.uploads
+    later = scene(frame(viewer, n=20), viewer)                         # a third of a second later
+    assert viewer.renderer.uploads == uploads                          # playing uploads no leaf
+    for img in (first, later):
+        assert (np.abs(img.astype(int) - still).max(axis=-1) > 8).mean() > 0.01   # the leaf moved
+    assert (np.abs(later.astype(int) - first).max(axis=-1) > 8).mean() > 0.002   # and keeps moving
+    # paused: the same frame again
+    view.wind_playing = False
+    paused = scene(frame(viewer), viewer)
+    t = view.wind.time
+    assert np.array_equal(scene(frame(viewer, n=2), viewer), paused) and view.wind.time == t
+    # speed 0: the still frame, bit for bit
+    view.wind = view.wind.replace(speed=0.0)
+    assert np.array_equal(scene(frame(viewer), viewer), still)
+    assert not viewer.gl_errors

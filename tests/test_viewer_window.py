@@ -213,3 +213,56 @@ def test_scene_window_scripted_run(gl, display, tmp_path):
     # leaves (green dominant) cover part of the viewport, the sky the rest
     green = (scene_part[..., 1] > scene_part[..., 0] + 10) & (scene_part[..., 1] > scene_part[..., 2] + 10)
     assert 0.02 < green.mean() < 0.9
+
+
+WIND_SESSION = textwrap.dedent('''
+    import json
+    from leafview.app.scene_view import SceneView
+    from leafview.app.viewer import open_state
+    from leafview.app.window import ViewerWindow
+    from leafview.core.params import LeafParams
+    from leafview.deform.wind import WindSettings
+    from leafview.resources import builtin_presets
+    from leafview.scene.spec import SceneSpec, build_scene
+
+    out = {}
+    path = builtin_presets()["ovate"]
+    # the scene viewer: the scene file's wind plays with the wall clock
+    spec = SceneSpec(species=(LeafParams.load(path),), layout="plant", leaves=200, seed=2,
+                     wind=WindSettings(speed=8.0))
+    win = ViewerWindow(None, (640, 400), make_view=lambda ctx: SceneView(ctx, build_scene(spec)))
+    v = win.viewer
+    win.step(); win.step(); first = v.read_frame()[:, :300]
+    t0, w0 = win._last_time, v.wind.time     # the clock reading of the frame just drawn
+    for _ in range(6):
+        win.step()
+    out["scene"] = [v.wind.time - w0, win._last_time - t0,
+                    float((v.read_frame()[:, :300] != first).any(axis=-1).mean()), v.gl_errors]
+    win.close()
+    # the single-leaf viewer: the panel's wind speed moves the leaf live
+    state = open_state(LeafParams.load(path), path)
+    win = ViewerWindow(state, (640, 400))
+    v = win.viewer
+    win.step(); still = v.read_frame()[:-60, :240]
+    state.view.wind = state.view.wind.replace(speed=8.0)
+    t0 = win._last_time
+    for _ in range(6):
+        win.step()
+    out["leaf"] = [state.view.wind.time, win._last_time - t0,
+                   float((v.read_frame()[:-60, :240] != still).any(axis=-1).mean()), v.gl_errors]
+    win.close()
+    print(json.dumps(out))
+''')
+
+
+def test_wind_plays_with_the_wall_clock_in_a_window(gl, display, tmp_path):
+    result = _run([sys.executable, "-c", WIND_SESSION], display, tmp_path)
+    assert result.returncode == 0, result.stderr[-3000:]
+    out = json.loads(result.stdout.strip().splitlines()[-1])
+    for name in ("scene", "leaf"):
+        advanced, elapsed, moved, errors = out[name]
+        # the wind's time is the wall clock's between the frames (each frame's interval, capped at 1 s)
+        assert 0.0 < advanced <= elapsed + 1e-4, (name, advanced, elapsed)
+        if elapsed < 1.0:   # no interval can have been capped
+            assert abs(advanced - elapsed) < 1e-4, (name, advanced, elapsed)
+        assert moved > 0.005 and errors == [], (name, moved)

@@ -1,5 +1,7 @@
 """The parameter panel: one imgui widget per field of :func:`~leafview.core.params.field_specs`,
-grouped by ``FieldSpec.group``, plus the sec. 6 edit sliders and the view settings.
+grouped by ``FieldSpec.group``, plus the sec. 6 edit sliders, the view settings and the wind
+(a **Wind** header: *play wind* and sliders for speed, direction, gustiness and flutter; the leaf
+moves live while it plays).
 
 Nothing here knows the parameter groups by name: a group added to ``LeafParams`` (ripple,
 bending, ...) gets a collapsing header and widgets from its metadata (label, soft range, step,
@@ -23,6 +25,7 @@ from imgui_bundle import imgui
 from leafview.app.lobe_panel import LobePanel
 from leafview.app.photo_reference import close_photo, fit_reference, report_line
 from leafview.app.state import ViewerState
+from leafview.app.wind_panel import wind_widgets
 from leafview.core.edits import curve_axis, curve_longitudinal, scale_width, skew_axis
 from leafview.core.params import FieldSpec, LeafParams
 
@@ -306,6 +309,19 @@ class ParamPanel:
         imgui.text_disabled("drag the orange (base) and blue (apex) points\nand the white handles over the photo")
 
     # -- view settings (not saved with the leaf) ------------------------------------------------
+    def draw_wind(self) -> None:
+        """The leaf in the wind (:mod:`leafview.app.wind_panel`): play/pause, speed, direction,
+        gustiness and flutter; not saved with the leaf."""
+        if self.expand_all:
+            imgui.set_next_item_open(True, imgui.Cond_.always)
+        if not imgui.collapsing_header("Wind##group-wind"):
+            return
+        view = self.state.view
+        view.wind, view.wind_playing, err = wind_widgets(view.wind, view.wind_playing, "view-wind")
+        self._record("view.wind")
+        if err:
+            self.state.error = err
+
     def draw_view(self) -> None:
         """Light direction, grid resolution and viewport toggles."""
         if self.expand_all:

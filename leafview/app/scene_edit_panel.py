@@ -6,6 +6,8 @@ The sliders hold a pending edit: a width factor, an asymmetry shift, a curvature
 or of S, F or G) and a move of one silhouette row's point. **Apply** turns every slider that is
 off its neutral value into one edit (each its own undo step), hands the changed leaves to
 ``update`` (the viewer's :func:`leafview.gpu.scene_edits.update_rows`) and puts the sliders back.
+**Save** writes the scene file with the edits (and, given ``spec``, the viewer's current
+``[light]`` and ``[wind]``).
 :class:`SceneEditPanel` keeps its logic out of imgui (:meth:`apply`, :meth:`undo`, :meth:`redo`,
 :meth:`save`), so tests call it directly.
 """
@@ -24,6 +26,7 @@ from numpy.typing import NDArray
 
 from leafview.errors import LeafviewError
 from leafview.scene.scene_edits import CURVES, SceneEditor
+from leafview.scene.spec import SceneSpec, save_scene
 
 __all__ = ["SceneEditPanel", "TARGET_LABELS"]
 
@@ -37,11 +40,14 @@ class SceneEditPanel:
 
     ``update``: called with the leaves whose rows changed after every apply, undo and redo.
     ``path``: where **Save** writes the scene file (None: the button asks for nothing and says so).
+    ``spec``: the scene's spec to save, e.g. with the viewer's light and wind (None: the editor's
+    scene's own); its ``edits`` are replaced by the editor's.
     """
 
     editor: SceneEditor
     update: Callable[[NDArray[np.int64]], Any]
     path: Path | None = None
+    spec: Callable[[], SceneSpec] | None = None
     target: int = 0              # index into _TARGETS
     species: int = 0
     width: float = 1.0
@@ -113,7 +119,10 @@ class SceneEditPanel:
             self.message = "no scene file to save to (open the viewer with one)"
             return False
         try:
-            self.editor.save(target)
+            if self.spec is None:
+                self.editor.save(target)
+            else:
+                save_scene(self.spec().replace(edits=self.editor.edits), target)
         except (LeafviewError, OSError) as exc:
             self.message = str(exc)
             return False

@@ -1,5 +1,6 @@
-"""The scene viewer without its window: orbit around a scene of many leaves, with a panel that
-shows what the culling pass drew at each level of detail and toggles culling and LOD live.
+"""The scene viewer without its window: orbit around a scene of many leaves in its canopy look
+(sun and shadows, sky, ground and wind: :class:`~leafview.gpu.canopy.CanopyRenderer`), with a panel
+that shows what the culling pass drew at each level of detail and toggles culling and LOD live.
 
 :class:`SceneView` has the frame interface of :class:`~leafview.app.viewer.Viewer`, so
 :class:`~leafview.app.window.ViewerWindow` hosts it unchanged (``leafview scene --view``), and
@@ -16,6 +17,17 @@ Scene-wide edits (:mod:`leafview.scene.scene_edits`, the panel of
 batch (:func:`leafview.gpu.scene_edits.update_rows`); **Save** writes the scene file with its
 ``[[edits]]``. Selected leaves are marked by a ring at their centre, drawn by imgui over the
 frame (at most :data:`MAX_MARKERS` of them, projected in numpy: no extra scene pass).
+
+Light and wind start from the scene file's ``[light]`` and ``[wind]`` and are changed live in
+the panel: **Light** has a widget per :class:`~leafview.scene.lighting.LightSettings` field (sun
+shadows, sun azimuth and elevation, intensity, sky, ground, exposure, tone map, transmission,
+gloss, ambient occlusion, alpha to coverage, shadow map size and cascades); **Wind** has *play
+wind* (play/pause) and sliders for speed, direction, gustiness λ (Geng, Hu & Zhang 2014, eq. 5) and
+blade flutter. While the wind plays, its time advances with the wall clock each frame: only the
+Wind uniform block changes (no rebuild). **Save** writes the current light and wind into the
+file's ``[light]`` and ``[wind]`` (the wind at the file's own ``time``). Picking draws its label
+pass with the wind of the frame shown, so a click picks the leaf where it is drawn. A context
+older than OpenGL 4.5 draws the plain look (no light or wind sections then).
 """
 
 from __future__ import annotations
@@ -23,7 +35,7 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import moderngl
 import numpy as np
@@ -33,14 +45,21 @@ from numpy.typing import NDArray
 from leafview.app.imgui_gl import ImguiRenderer
 from leafview.app.orbit import OrbitCamera
 from leafview.app.scene_edit_panel import SceneEditPanel
+from leafview.app.settings_panel import settings_widgets
 from leafview.app.viewer import begin_io
+from leafview.app.wind_panel import advance_wind, wind_widgets
 from leafview.app.window import ViewerWindow
+from leafview.deform.wind import WindSettings
+from leafview.errors import GLUnavailable
+from leafview.gpu.canopy import CanopyRenderer
 from leafview.gpu.picking import pick, pick_box, project
 from leafview.gpu.scene import CullSettings, SceneRenderer
 from leafview.gpu.scene_edits import update_rows
 from leafview.gpu.targets import RenderTarget, read_rgba
+from leafview.gpu.wind import wind_defines
+from leafview.scene.lighting import LightSettings
 from leafview.scene.scene_edits import SceneEditor
-from leafview.scene.spec import Scene
+from leafview.scene.spec import Scene, SceneSpec
 
 __all__ = ["SceneView", "view_scene"]
 
@@ -48,6 +67,8 @@ PANEL_WIDTH = 300
 BACKGROUND = (0.62, 0.72, 0.80, 1.0)  # a pale sky behind the canopy
 MAX_MARKERS = 4000                     # selected leaves marked on screen
 CLICK_SLOP = 4.0                       # pixels a press may move and still be a click
+_CULL = CullSettings()
+SUN_RANGES = {"sun": ((-180.0, 360.0), (0.0, 90.0))}   # the sun's sliders: azimuth, elevation
 
 
 class _Quit:
@@ -75,20 +96,49 @@ class _State:
         return None
 
 
+class _WindyDraws:
+    """A scene renderer whose draws add the wind's defines: picking's label pass
+    (:func:`leafview.gpu.picking.pick` draws with ``renderer.draw(settings, defines=...)``) then
+    labels the leaves where the wind has moved them, as drawn."""
+
+    def __init__(self, renderer: SceneRenderer, defines: dict[str, int]) -> None:
+        self._renderer, self._defines = renderer, defines
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._renderer, name)
+
+    def draw(self, settings: CullSettings = _CULL, *, defines: Any = None) -> None:
+        self._renderer.draw(settings, defines={**(defines or {}), **self._defines})
+
+
 class SceneView:
-    """Scene + panel for one GL context (creates and releases its own imgui context)."""
+    """Scene + panel for one GL context (creates and releases its own imgui context).
+
+    ``light`` and ``wind`` default to the scene file's (``scene.spec.light``, ``scene.spec.wind``);
+    :attr:`light`, :attr:`wind` and :attr:`wind_playing` are what the panel edits (tests set them).
+    """
 
     def __init__(self, ctx: moderngl.Context, scene: Scene, *, veins: bool = True,
-                 path: str | Path | None = None) -> None:
+                 path: str | Path | None = None, light: LightSettings | None = None,
+                 wind: WindSettings | None = None) -> None:
         self.ctx, self.scene = ctx, scene
         self.imgui_ctx: imgui.internal.Context | None = imgui.create_context()   # None once released
         imgui.get_io().set_ini_filename(None)
         self.gui: ImguiRenderer | None = None
         self.renderer: SceneRenderer | None = None
+        self.canopy: CanopyRenderer | None = None   # None: a context without the canopy look
+        self.light = scene.spec.light if light is None else light
+        self.wind = scene.spec.wind if wind is None else wind
+        self.wind_playing = True
+        self.look_error: str | None = None           # a light or wind value the settings refused
         try:
             self.gui = ImguiRenderer(ctx)
             self.renderer = SceneRenderer(ctx, scene)   # the vein fields, shown or not by the checkbox
             self.renderer.show_veins = veins
+            try:
+                self.canopy = CanopyRenderer(self.renderer, self.light, self.wind)
+            except GLUnavailable as exc:
+                self.look_error = str(exc)
         except BaseException:
             self.release()
             raise
@@ -107,10 +157,17 @@ class SceneView:
         self.counts = np.zeros(len(self.renderer.command_grids), np.int64)   # lobed levels after the others
         # scene-wide edits: the editor, its panel (Save writes ``path``) and the mouse's selection state
         self.editor = SceneEditor(scene)
-        self.edit_panel = SceneEditPanel(self.editor, self._rows_changed, None if path is None else Path(path))
+        self.edit_panel = SceneEditPanel(self.editor, self._rows_changed, None if path is None else Path(path),
+                                         spec=self.saved_spec)
         self._press: tuple[float, float] | None = None   # where a left or right press started
         self._box: tuple[float, float, float, float] | None = None   # the box being drawn (window points)
         self._view: tuple[int, int, float, float] = (1, 1, 1.0, 1.0)   # scene px size, points -> px scale
+
+    def saved_spec(self) -> SceneSpec:
+        """The scene's spec with the panel's light and wind (what **Save** writes; the wind at the
+        file's own time, the clock's being the session's)."""
+        spec = self.scene.spec
+        return spec.replace(light=self.light, wind=self.wind.replace(time=spec.wind.time))
 
     def _rows_changed(self, leaves: NDArray[np.int64]) -> None:
         assert self.renderer is not None
@@ -141,13 +198,20 @@ class SceneView:
         self._panel(w, h)
         self._overlay()
         imgui.render()
+        self.wind = advance_wind(self.wind, self.wind_playing, float(io.delta_time))
         fbo = self._target(fw, fh)
-        fbo.use()
-        fbo.clear(*BACKGROUND, depth=1.0)
-        self.ctx.viewport = (0, 0, px_w, fh)
         assert self.renderer is not None and self.gui is not None
-        self.renderer.set_camera(self.camera.camera(px_w, fh), (px_w, fh))
-        self.renderer.draw(self.settings)
+        camera = self.camera.camera(px_w, fh)
+        if self.canopy is not None:
+            self._sync_look()
+            self.canopy.draw(camera, (px_w, fh), self.settings, framebuffer=fbo, background=BACKGROUND)
+        else:
+            fbo.use()
+            fbo.clear(*BACKGROUND, depth=1.0)
+            self.ctx.viewport = (0, 0, px_w, fh)
+            self.renderer.set_camera(camera, (px_w, fh))
+            self.renderer.draw(self.settings)
+        fbo.use()
         self.counts = self.renderer.level_counts()
         self.ctx.disable(moderngl.DEPTH_TEST)
         self.ctx.viewport = (0, 0, fw, fh)
@@ -160,6 +224,23 @@ class SceneView:
             self._dts.append(io.delta_time)
             self.fps = len(self._dts) / sum(self._dts)
         return fbo
+
+    def _sync_look(self) -> None:
+        """Hand the panel's light and wind to the canopy renderer when they changed (the wind's
+        time changes every frame it plays: one uniform block write)."""
+        assert self.canopy is not None
+        if self.canopy.light != self.light:
+            self.canopy.set_light(self.light)
+        if self.canopy.wind != self.wind:
+            self.canopy.set_wind(self.wind)
+
+    def _picking(self) -> SceneRenderer:
+        """The renderer picking draws: with the wind of the frame shown (its block bound)."""
+        assert self.renderer is not None
+        if self.canopy is None or not self.canopy.wind.active:
+            return self.renderer
+        self.canopy.wind_uniforms.bind(self.renderer)
+        return cast(SceneRenderer, _WindyDraws(self.renderer, wind_defines(self.canopy.wind)))
 
     def _input(self, io: Any, scene_w: float, h: int) -> None:
         def pressed(key: imgui.Key) -> bool:
@@ -216,7 +297,7 @@ class SceneView:
         """Pick the leaf drawn at window point ``at`` (label pass); select it (add: to the selection)."""
         assert self.renderer is not None
         px_w, fh, _, _ = self._view
-        leaf = pick(self.renderer, self.camera.camera(px_w, fh), (px_w, fh), *self._pixels(*at), self.settings)
+        leaf = pick(self._picking(), self.camera.camera(px_w, fh), (px_w, fh), *self._pixels(*at), self.settings)
         if leaf is not None:
             self.editor.select([leaf], add=add)
             self.edit_panel.target = 2
@@ -229,7 +310,7 @@ class SceneView:
         px_w, fh, _, _ = self._view
         x0, y0 = self._pixels(box[0], box[1])
         x1, y1 = self._pixels(box[2], box[3])
-        leaves = pick_box(self.renderer, self.camera.camera(px_w, fh), (px_w, fh), (x0, y0, x1, y1), self.settings)
+        leaves = pick_box(self._picking(), self.camera.camera(px_w, fh), (px_w, fh), (x0, y0, x1, y1), self.settings)
         self.editor.select(leaves, add=add)
         self.edit_panel.target = 2
 
@@ -275,9 +356,34 @@ class SceneView:
         for k, ((nu, nv), c) in enumerate(zip(self.renderer.command_grids, self.counts)):
             imgui.text(f"  {nu}×{nv} grid{' (lobed)' if k >= lobed else ''}: {int(c):,}")
         imgui.text(f"triangles: {self.renderer.triangles(self.counts):,}")
+        self._look_panel()
         imgui.separator()
         self.edit_panel.draw()
         imgui.end()
+
+    def _look_panel(self) -> None:
+        """The Light and Wind sections (the canopy look only)."""
+        if self.canopy is None:
+            return
+        imgui.separator()
+        imgui.push_item_width(150)
+        if imgui.collapsing_header("Light##look"):
+            light, err = settings_widgets(self.light, "light", SUN_RANGES)
+            self._look_changed(light is not self.light, err)
+            self.light = light
+        if imgui.collapsing_header("Wind##look", imgui.TreeNodeFlags_.default_open):
+            wind, self.wind_playing, err = wind_widgets(self.wind, self.wind_playing, "wind")
+            self._look_changed(wind is not self.wind, err)
+            self.wind = wind
+        if self.look_error:
+            imgui.text_wrapped(self.look_error)
+        imgui.pop_item_width()
+
+    def _look_changed(self, changed: bool, err: str | None) -> None:
+        if err:
+            self.look_error = err
+        elif changed:
+            self.look_error = None
 
     # -- framebuffers -------------------------------------------------------------------------------
     def _target(self, w: int, h: int) -> moderngl.Framebuffer:
@@ -301,6 +407,9 @@ class SceneView:
 
     def release(self) -> None:
         self._release_targets()
+        if self.canopy is not None:
+            self.canopy.release()
+            self.canopy = None
         if self.renderer is not None:
             self.renderer.release()
             self.renderer = None
@@ -313,10 +422,13 @@ class SceneView:
 
 
 def view_scene(scene: Scene, size: tuple[int, int] = (1280, 800), frames: int | None = None,
-               screenshot: str | Path | None = None, *, veins: bool = True, path: str | Path | None = None) -> int:
+               screenshot: str | Path | None = None, *, veins: bool = True, path: str | Path | None = None,
+               light: LightSettings | None = None, wind: WindSettings | None = None) -> int:
     """Open ``scene`` in a window (blocks until closed), its veins shown or not (``veins``, the
-    panel's checkbox); the edit panel's Save writes ``path`` (the scene file). Returns the exit code."""
+    panel's checkbox); the edit panel's Save writes ``path`` (the scene file). ``light``, ``wind``:
+    the look to start from (None: the scene file's). Returns the exit code."""
 
     with ViewerWindow(None, size, title="leafview scene",
-                      make_view=lambda ctx: SceneView(ctx, scene, veins=veins, path=path)) as win:
+                      make_view=lambda ctx: SceneView(ctx, scene, veins=veins, path=path, light=light,
+                                                      wind=wind)) as win:
         return win.run(frames=frames, screenshot=screenshot)

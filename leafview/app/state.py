@@ -22,6 +22,7 @@ from leafview.botany.lobe_outline import compound_document
 from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.io import read_document
 from leafview.core.params import FieldSpec, LeafParams, ParamError, field_specs, parse_params
+from leafview.deform.wind import WindSettings
 
 __all__ = ["ViewerState", "ViewSettings", "ReferencePhoto", "get_field", "with_field", "HISTORY_LIMIT"]
 
@@ -40,6 +41,8 @@ class ViewSettings:
     light_azimuth: float = 37.9     # key light, degrees (0 = from -y, towards +x positive)
     light_elevation: float = 55.2   # degrees above the leaf plane
     show_veins: bool = True         # leaves with venation show their veins (--veins on|off)
+    wind: WindSettings = field(default_factory=WindSettings)   # the leaf in the wind (speed 0: still)
+    wind_playing: bool = True       # the wind's time follows the wall clock (play/pause)
 
     def light_direction(self) -> tuple[float, float, float]:
         """Unit vector towards the key light (world space, z up)."""

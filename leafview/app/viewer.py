@@ -6,6 +6,13 @@ imgui panel into an offscreen framebuffer, from imgui's io (keys, mouse) and the
 ``leafview bench`` drive it on a headless EGL context with injected imgui events. An edit made
 during a frame (panel, handle drag, shortcut) is uploaded (the leaf's uniform block, under 1 KiB,
 plus one tiny compute dispatch; nothing else) before that same frame's scene is drawn.
+
+Wind (the panel's **Wind** header, :mod:`leafview.app.wind_panel`): with a speed above 0 the leaf
+is drawn with ``LEAF_WIND`` (petiole turned, midrib bent and blade fluttering by the turbulent load
+of Geng, Hu & Zhang 2014, eq. 5; the single leaf takes the phase of leaf index 0), and while *play
+wind* is on its time advances with the wall clock each frame: one Wind uniform block write a
+frame, nothing rebuilt. The control polygons, handles and close-up vein tubes show the leaf at
+rest. Speed 0 draws the still leaf, bit for bit.
 """
 
 from __future__ import annotations
@@ -35,11 +42,13 @@ from leafview.app.overlay import Overlay
 from leafview.app.panel import ParamPanel
 from leafview.app.photo_reference import PhotoLayer
 from leafview.app.state import ViewerState
+from leafview.app.wind_panel import advance_wind
 from leafview.botany.leaf_surface import drawn_grid, grid_points
 from leafview.core.params import LeafParams
 from leafview.export.images import ImageWriteError, write_image
 from leafview.gpu.renderer import LeafRenderer, Lighting
 from leafview.gpu.targets import RenderTarget
+from leafview.gpu.wind import WindUniforms, wind_defines
 from leafview.resources import builtin_presets, preset_dir
 
 __all__ = ["Viewer", "PANEL_WIDTH", "BACKGROUND", "open_state", "is_software"]
@@ -104,11 +113,13 @@ class Viewer:
         self.renderer: LeafRenderer | None = None
         self.overlay: Overlay | None = None
         self.photo: PhotoLayer | None = None     # the reference photo behind the leaf
+        self.wind_uniforms: WindUniforms | None = None
         try:
             self.gui = ImguiRenderer(ctx)
             self.renderer = LeafRenderer(ctx)
             self.overlay = Overlay(ctx)
             self.photo = PhotoLayer(ctx)
+            self.wind_uniforms = WindUniforms(ctx)
         except BaseException:
             self.release()
             raise
@@ -185,6 +196,8 @@ class Viewer:
         imgui.render()
 
         self._upload()
+        view = self.state.view
+        view.wind = advance_wind(view.wind, view.wind_playing, float(io.delta_time))
         fbo = self._target(fw, fh)
         scene_px = max(1, int(round(scene_w * fw / w)))
         self._draw_scene(scene_px, fh, scene_w, h)
@@ -249,6 +262,7 @@ class Viewer:
         self.panel.draw_groups()
         for draw in self.custom_panels:
             draw(self.state)
+        self.panel.draw_wind()
         self.panel.draw_view()
         _, view.show_veins = imgui.checkbox("veins##view", view.show_veins)
         imgui.pop_item_width()
@@ -306,7 +320,7 @@ class Viewer:
         if self.photo is not None:
             self.photo.draw_photo(view_proj, ref, self.state.params)
         self.renderer.set_camera(cam, srgb=True, lighting=light)
-        self.renderer.draw(grid=view.grid, wireframe=view.wireframe)
+        self.renderer.draw(grid=view.grid, wireframe=view.wireframe, defines=self._wind())
         if view.show_ground and not behind:
             self.overlay.draw_ground(view_proj)
         if view.show_controls:
@@ -316,6 +330,16 @@ class Viewer:
         self.ctx.disable(moderngl.DEPTH_TEST)
         if msaa is not None:
             self.ctx.copy_framebuffer(fbo, msaa)
+
+    def _wind(self) -> dict[str, int]:
+        """The wind's defines for this frame's leaf, its block written and bound when it blows."""
+        wind = self.state.view.wind
+        if not wind.active or self.wind_uniforms is None:
+            return {}
+        if self.wind_uniforms.wind != wind:
+            self.wind_uniforms.set(wind)
+        self.wind_uniforms.bind()
+        return wind_defines(wind)
 
     # -- framebuffers -----------------------------------------------------------------------------
     def _target(self, w: int, h: int) -> moderngl.Framebuffer:
@@ -401,7 +425,7 @@ class Viewer:
     def release(self) -> None:
         """Release every GL object and the imgui context (idempotent)."""
         self._release_targets()
-        for name in ("gui", "renderer", "overlay", "photo"):
+        for name in ("gui", "renderer", "overlay", "photo", "wind_uniforms"):
             obj = getattr(self, name, None)
             if obj is not None:
                 obj.release()

@@ -266,11 +266,14 @@ class LeafRenderer:
         return self.resources.grid(nu, nv).vao(self.program)
 
     # -- drawing --------------------------------------------------------------------------------
-    def draw(self, grid: tuple[int, int] = DEFAULT_GRID, *, wireframe: bool = False) -> None:
+    def draw(self, grid: tuple[int, int] = DEFAULT_GRID, *, wireframe: bool = False,
+             defines: Mapping[str, object] | None = None) -> None:
         """Draw the leaf last given to :meth:`set_leaf` with the camera last given to
         :meth:`set_camera` into the currently bound framebuffer (interactive use: the viewer
         uploads only what an edit changed, then calls this every frame). A lobed leaf is drawn on
-        :func:`~leafview.gpu.lobe_tables.lobed_grid` of ``grid``."""
+        :func:`~leafview.gpu.lobe_tables.lobed_grid` of ``grid``. ``defines``: extra defines of
+        the program variant (e.g. ``LEAF_WIND``, with the Wind block bound by the caller); the
+        close-up vein tubes are left out of a ``LEAF_WIND`` draw (they would not move with it)."""
         if self.lobed:
             grid = lobed_grid(grid)
         self.frame.fit_viewport()   # the veins' level of detail: this draw's image height
@@ -280,9 +283,9 @@ class LeafRenderer:
         try:
             # the full program, less the sweep branch for an unlobed leaf (llvmpipe runs untaken
             # branches too: it would cost every vertex of the viewer's leaf)
-            program = self.leaf_program(self._draw_defines)
+            program = self.leaf_program({**self._draw_defines, **(defines or {})})
             self.resources.grid(*grid).vao(program).render(moderngl.TRIANGLES)
-            if not wireframe:
+            if not wireframe and "LEAF_WIND" not in (defines or {}):
                 self.vein_tubes.draw(self.frame)   # veins as geometry where they are wide enough on screen
         finally:
             self.ctx.wireframe = False

@@ -26,8 +26,10 @@ cover the fragment; over the last :data:`FADE` of a cascade's range it cross-fad
 The fragment is moved along its normal (turned toward the sun: leaves are two-sided sheets) by
 ``normal_offset`` texels times ``sin θ`` (normal-offset shadows, Holbert 2011; θ the angle between
 normal and sun), and toward the sun by ``depth_bias`` texels, then compared with 3 × 3 bilinear
-depth-compare taps one texel apart (percentage-closer filtering, Reeves, Salesin & Cook 1987),
-each tap clamped half a texel inside its tile.
+depth-compare taps one texel apart (percentage-closer filtering, Reeves, Salesin & Cook 1987):
+a 4 × 4-texel footprint weighted ``(1 - f, 1, 1, f) / 3`` per axis (``f`` the bilinear fraction),
+which the shader reads as four depth-compare gathers; the footprint stays inside the cascade's
+tile (the point clamped 1.5 texels inside its edges).
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ __all__ = ["MAX_CASCADES", "SPLIT_BLEND", "FADE", "DEPTH_BIAS", "NORMAL_OFFSET",
 MAX_CASCADES = 4
 SPLIT_BLEND = 0.75       # λ of the practical split scheme
 FADE = 0.1               # fraction of a cascade's range (from the previous split, or 0) cross-faded into the next
-DEPTH_BIAS = 1.5         # texels toward the sun (covers the shadow pass's coarser level of detail)
+DEPTH_BIAS = 2.0         # texels toward the sun (covers the shadow pass's coarser level of detail, 2 texels)
 NORMAL_OFFSET = 2.5      # texels along the normal, times sin θ (the 3 × 3 bilinear kernel reaches 2 texels)
 DEPTH_MARGIN = 0.05      # of the receiver box's depth, added toward the sun (and 0.01 away from it)
 AUTO_RATIO = 6.0         # automatic count: one cascade per factor AUTO_RATIO of far / near
@@ -236,20 +238,25 @@ def shadow_cascades(camera: Camera, bounds: tuple[ArrayLike, ArrayLike], sun: Ar
     return Cascades(tuple(cameras), np.array(mats), s[1:].copy(), np.array(radii), int(tile), float(near))
 
 
-def _bilinear_compare(atlas: NDArray[np.float64], uv: NDArray[np.float64], ref: NDArray[np.float64]
-                      ) -> NDArray[np.float64]:
-    """GL_LINEAR sampling of ``ref <= depth`` (a sampler2DShadow with compare function LEQUAL)."""
+def _pcf(atlas: NDArray[np.float64], t: NDArray[np.float64], ref: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The mean of 3 × 3 bilinear ``ref <= depth`` taps one texel apart around the atlas texel
+    coordinates ``t`` (N, 2; texel centres at integers): texels ``c - 1 … c + 2`` per axis
+    (``c = floor(t)``, ``f = t - c``) weighted ``(1 - f, 1, 1, f) / 3`` per axis, as the shader's
+    four depth-compare gathers read them (texels past the atlas clamp to its edge)."""
     h, w = atlas.shape
-    x, y = uv[:, 0] * w - 0.5, uv[:, 1] * h - 0.5
-    x0, y0 = np.floor(x), np.floor(y)
-    fx, fy = x - x0, y - y0
-    x0, y0 = x0.astype(np.int64), y0.astype(np.int64)
-    out = np.zeros(len(uv))
-    for dy, wy in ((0, 1.0 - fy), (1, fy)):
-        for dx, wx in ((0, 1.0 - fx), (1, fx)):
-            d = atlas[np.clip(y0 + dy, 0, h - 1), np.clip(x0 + dx, 0, w - 1)]
-            out += wx * wy * (ref <= d)
-    return out
+    c = np.floor(t)
+    f = t - c
+    ci = c.astype(np.int64)
+    one = np.ones(len(t))
+    wx = np.stack([1.0 - f[:, 0], one, one, f[:, 0]])
+    wy = np.stack([1.0 - f[:, 1], one, one, f[:, 1]])
+    total = np.zeros(len(t))
+    for dj in range(4):
+        y = np.clip(ci[:, 1] - 1 + dj, 0, h - 1)
+        for di in range(4):
+            d = atlas[y, np.clip(ci[:, 0] - 1 + di, 0, w - 1)]
+            total += wx[di] * wy[dj] * (ref <= d)
+    return total / 9.0
 
 
 def _cascade_visibility(k: int, count: int, world: NDArray[np.float64], n: NDArray[np.float64],
@@ -264,18 +271,10 @@ def _cascade_visibility(k: int, count: int, world: NDArray[np.float64], n: NDArr
     s = c * 0.5 + 0.5
     covered = np.all((s[:, :2] >= 0.0) & (s[:, :2] <= 1.0), axis=1)
     ref = np.clip(s[:, 2] - depth_bias * texel * 0.5 * np.linalg.norm(m[2, :3]), 0.0, 1.0)
-    cols, rows = atlas_layout(count)
-    size = np.array([1.0 / cols, 1.0 / rows])
-    origin = np.array(tile_origin(k), np.float64) * size
-    h, w = atlas.shape
-    half = 0.5 / np.array([w, h], np.float64)
-    lo, hi = origin + half, origin + size - half
-    total = np.zeros(len(world))
-    for j in (-1, 0, 1):
-        for i in (-1, 0, 1):
-            uv = origin + (s[:, :2] + np.array([i, j]) / tile) * size
-            total += _bilinear_compare(atlas, np.clip(uv, lo, hi), ref)
-    return np.where(covered, total / 9.0, -1.0)
+    origin = np.array(tile_origin(k), np.float64) * tile
+    t = np.clip(origin + s[:, :2] * tile - 0.5, origin + 1.0, origin + (tile - 2.0))
+    total = _pcf(atlas, t, ref)
+    return np.where(covered, total, -1.0)
 
 
 def visibility(world: ArrayLike, normals: ArrayLike, view_depth: ArrayLike, atlas: ArrayLike,
