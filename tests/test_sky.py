@@ -324,8 +324,6 @@ def test_ground_writes_depth(canopy_gl):
 def test_shadowed_ground_matches_numpy(canopy_gl, presets):
     """GroundPass(shadows=True): the sun's term times sun_visibility of leaf_shadow.glsl (its numpy
     twin leafview.scene.sun.visibility on the same depth atlas), the contacts on the ambient only."""
-    if not (ROOT / "shaders" / "leaf_shadow.glsl").exists():
-        pytest.skip("shaders/leaf_shadow.glsl (the shadow pass's) is not there yet")
     from leafview.gpu.scene import SceneRenderer
     from leafview.gpu.shadow import ShadowPass
     from leafview.gpu.sky import CONTACT_STRENGTH, GroundPass

@@ -397,7 +397,7 @@ def _fake(t: float) -> np.ndarray:
 
 @pytest.mark.parametrize("name", ["anim.mp4", "anim.gif", "frames/"])
 def test_write_animation(tmp_path, name):
-    imageio_ffmpeg = pytest.importorskip("imageio_ffmpeg")
+    import imageio_ffmpeg  # a dependency of the package (pyproject): never skipped
     out = str(tmp_path / name)
     times = [i / 24 for i in range(10)]
     ticks = []

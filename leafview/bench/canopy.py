@@ -20,7 +20,6 @@ Nothing is asserted here; the tests check the same goals at small sizes.
 
 from __future__ import annotations
 
-import statistics
 from typing import Any
 
 import moderngl
@@ -28,7 +27,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leafview.bench.scene import SIZE, SPECIES, _spec
-from leafview.bench.timing import Progress, bench_context, gl_info, median_time
+from leafview.bench.timing import Progress, bench_context, gl_info, interleaved, median_time
 from leafview.core.params import LeafParams
 from leafview.deform.wind import WindSettings
 from leafview.gpu.canopy import CanopyRenderer
@@ -98,17 +97,7 @@ def _ratio(ctx: moderngl.Context, canopy: CanopyRenderer, target: RenderTarget, 
         canopy.draw(camera, SIZE, CullSettings(), framebuffer=target.fbo)
         target.read()
 
-    frame(base)
-    frame(other)   # programs compiled, shadow maps allocated before the clock
-    ta, tb, ratios = [], [], []
-    for _ in range(rounds):
-        a = median_time(lambda: frame(base), 1, ctx.finish)
-        b = median_time(lambda: frame(other), 1, ctx.finish)
-        ta.append(a)
-        tb.append(b)
-        ratios.append(b / a)
-    return {"ratio": statistics.median(ratios), "base_ms": 1e3 * statistics.median(ta),
-            "other_ms": 1e3 * statistics.median(tb), "range": [min(ratios), max(ratios)]}
+    return interleaved(lambda: frame(base), lambda: frame(other), rounds, ctx.finish)
 
 
 def _shadow_pass_profile(ctx: moderngl.Context, canopy: CanopyRenderer, camera: Any, rounds: int) -> dict[str, Any]:

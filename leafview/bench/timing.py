@@ -19,7 +19,7 @@ import moderngl
 
 from leafview.gpu.context import create_headless_context
 
-__all__ = ["median_time", "Progress", "gl_info", "log_gl_renderer", "bench_context"]
+__all__ = ["median_time", "interleaved", "Progress", "gl_info", "log_gl_renderer", "bench_context"]
 
 
 def median_time(fn: Callable[[], Any], repeats: int, finish: Callable[[], None] | None = None) -> float:
@@ -32,6 +32,27 @@ def median_time(fn: Callable[[], Any], repeats: int, finish: Callable[[], None] 
             finish()
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
+
+
+def interleaved(base: Callable[[], Any], other: Callable[[], Any], rounds: int,
+                finish: Callable[[], None] | None = None) -> dict[str, Any]:
+    """``base`` and ``other`` timed in alternation, ``rounds`` pairs (each run once first, so that
+    compilation and allocation stay out of the clock): ms of each (median), the median of the
+    per-pair ratios other ÷ base, and their range. Side by side on a noisy machine, the pairs share
+    its load."""
+    base()
+    other()
+    if finish is not None:
+        finish()
+    ta, tb, ratios = [], [], []
+    for _ in range(rounds):
+        a = median_time(base, 1, finish)
+        b = median_time(other, 1, finish)
+        ta.append(a)
+        tb.append(b)
+        ratios.append(b / a)
+    return {"ratio": statistics.median(ratios), "base_ms": 1e3 * statistics.median(ta),
+            "other_ms": 1e3 * statistics.median(tb), "range": [min(ratios), max(ratios)]}
 
 
 class Progress:

@@ -16,16 +16,19 @@ from __future__ import annotations
 import argparse
 import importlib
 import sys
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from tqdm import tqdm
 
 from leafview.atomic import UniqueNames, check_folder, check_target
+from leafview.botany.vein_shape import shape_grid
+from leafview.botany.venation import check_veins
 from leafview.core.io import load_leaves, register_document_reader
 from leafview.core.limits import MAX_GRID, MAX_IMAGE_SIDE, parse_count
 from leafview.core.params import LeafParams
+from leafview.core.settings import SettingsTable
 from leafview.errors import ParamError, UsageError
 from leafview.resources import builtin_presets, resolve_preset
 from leafview.scene.camera import VIEWS, check_leaf_framable
@@ -69,6 +72,39 @@ def int_in_range(text: str, *, lo: int, hi: int | None, what: str, name: str) ->
         bound = f"between {lo} and {hi}" if hi is not None else f"at least {lo}"
         raise argparse.ArgumentTypeError(f"{name} must be {bound} {what}, got {n}")
     return n
+
+
+_MAX_NUMBER_TEXT = 60
+
+
+def numbers(text: str, count: int, what: str) -> tuple[float, ...]:
+    """``count`` comma-separated numbers for argparse (not checked for finiteness: the setting
+    they go to says what it accepts); a type error naming ``what`` otherwise."""
+    parts = text[:_MAX_NUMBER_TEXT + 1].split(",")
+    try:
+        if len(text) > _MAX_NUMBER_TEXT or len(parts) != count:
+            raise ValueError(text)
+        return tuple(float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text[:_MAX_NUMBER_TEXT]!r}") from None
+
+
+def checked_setting(settings: type[SettingsTable], name: str, value: Any) -> Any:
+    """``value`` as field ``name`` of a settings table (its checks, e.g. ``light.sun[1]``, as
+    argparse's type error)."""
+    try:
+        return getattr(settings(**{name: value}), name)
+    except ParamError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def setting_option(settings: type[SettingsTable], name: str, what: str) -> Callable[[str], Any]:
+    """An argparse type for one number that is field ``name`` of ``settings`` (``--exposure``,
+    ``--wind``): parsed, then checked by the settings table (NaN, range) before anything runs."""
+    def parse(text: str) -> Any:
+        return checked_setting(settings, name, numbers(text, 1, what)[0])
+    parse.__name__ = name   # argparse names the type in some messages
+    return parse
 
 
 def int_pair(text: str, *, lo: int, hi: int, what: str, example: str) -> tuple[int, int]:
@@ -142,7 +178,20 @@ def load_leaf_files(paths: Sequence[Path]) -> list[LeafParams]:
     """Every leaf of the given files, in order: a leaf set (``*.leaves.json``) gives all of its
     leaves, any other preset file (a compound ``lobed = 1`` file too) one. Each leaf is named
     (its file's stem when unnamed)."""
-    return [leaf for path in paths for leaf in load_leaves(path)]
+    return [_checked_veins(leaf, path) for path in paths for leaf in load_leaves(path)]
+
+
+def _checked_veins(leaf: LeafParams, path: Path) -> LeafParams:
+    """``leaf``, its vein tree and vein edits checked now (:func:`check_veins`, and the blade's
+    folding by :func:`shape_grid`, cached for the drawing that follows), so that a refusal names
+    the file before anything is drawn or written."""
+    if leaf.venation.enabled or leaf.venation.edits:
+        try:
+            check_veins(leaf)
+            shape_grid(leaf)
+        except ParamError as exc:
+            raise exc.with_source(str(path)) from None
+    return leaf
 
 
 def load_framable_leaves(paths: Sequence[Path]) -> list[LeafParams]:
@@ -152,6 +201,7 @@ def load_framable_leaves(paths: Sequence[Path]) -> list[LeafParams]:
     leaves: list[LeafParams] = []
     for path in paths:
         for leaf in load_leaves(path):
+            _checked_veins(leaf, path)
             try:
                 check_leaf_framable(leaf)
             except ParamError as exc:

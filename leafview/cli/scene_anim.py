@@ -25,7 +25,6 @@ Example::
 from __future__ import annotations
 
 import argparse
-import math
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -36,8 +35,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leafview.atomic import atomic_output, check_folder, check_target, outputs
+from leafview.cli.args import numbers, setting_option
 from leafview.deform.wind import WindSettings
-from leafview.errors import OutputError, OutputPathError, ParamError, UsageError
+from leafview.errors import OutputError, OutputPathError, UsageError
 from leafview.export.images import write_image
 
 __all__ = ["add_wind_arguments", "wind_from_args", "check_animation_output", "animation_kind", "animation_times",
@@ -47,49 +47,21 @@ __all__ = ["add_wind_arguments", "wind_from_args", "check_animation_output", "an
 ANIMATION_EXTENSIONS = (".mp4", ".gif")
 DEFAULT_FPS = 30.0
 MAX_FPS = 240.0
-_MAX_TEXT = 60
 
 
-def _number(text: str, what: str) -> float:
-    try:
-        if len(text) > _MAX_TEXT:
-            raise ValueError(text)
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected {what}, got {text[:_MAX_TEXT]!r}") from None
-    if not math.isfinite(x):
-        raise argparse.ArgumentTypeError(f"{what} must be finite, got {text[:_MAX_TEXT]!r}")
-    return x
-
-
-def _checked(**changes: Any) -> WindSettings:
-    """WindSettings with ``changes`` over the defaults; a ParamError as argparse's type error."""
-    try:
-        return WindSettings(**changes)
-    except ParamError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def wind_speed(text: str) -> float:
-    """``--wind SPEED``: scene units per second, checked as ``wind.speed``."""
-    return float(_checked(speed=_number(text, "a wind speed (scene units per second)")).speed)
-
-
-def wind_direction(text: str) -> float:
-    """``--wind-dir DEG``: the direction the wind blows towards, degrees counter-clockwise from +x."""
-    return float(_checked(direction=_number(text, "a direction in degrees")).direction)
-
-
-def wind_time(text: str) -> float:
-    """``--time T``: seconds (the first frame's time of an animation), checked as ``wind.time``."""
-    return float(_checked(time=_number(text, "a time in seconds")).time)
+wind_speed = setting_option(WindSettings, "speed", "a wind speed (scene units per second)")
+"""``--wind SPEED``: scene units per second, checked as ``wind.speed``."""
+wind_direction = setting_option(WindSettings, "direction", "a direction in degrees")
+"""``--wind-dir DEG``: the direction the wind blows towards, degrees counter-clockwise from +x."""
+wind_time = setting_option(WindSettings, "time", "a time in seconds")
+"""``--time T``: seconds (the first frame's time of an animation), checked as ``wind.time``."""
 
 
 def frame_rate(text: str) -> float:
     """``--fps FPS``: frames per second of an animation, in (0, 240]."""
-    x = _number(text, "frames per second")
-    if not 0.0 < x <= MAX_FPS:
-        raise argparse.ArgumentTypeError(f"--fps must lie in (0, {MAX_FPS:g}], got {text[:_MAX_TEXT]}")
+    x = numbers(text, 1, "frames per second")[0]
+    if not 0.0 < x <= MAX_FPS:   # NaN fails this too
+        raise argparse.ArgumentTypeError(f"--fps must lie in (0, {MAX_FPS:g}], got {text[:60]!r}")
     return x
 
 

@@ -15,54 +15,27 @@ Examples::
 from __future__ import annotations
 
 import argparse
-import math
 from typing import Any
 
-from leafview.errors import ParamError
+from leafview.cli.args import checked_setting, numbers, setting_option
 from leafview.scene.lighting import TONE_MAPS, LightSettings
 
 __all__ = ["add_light_arguments", "light_from_args", "sun_angles", "exposure", "LIGHT_SWITCHES", "ON_OFF"]
 
 ON_OFF = ("on", "off")
 LIGHT_SWITCHES = ("shadows", "sky", "ground", "ssao")   # on|off options, named as LightSettings' fields
-_MAX_TEXT = 60
-
-
-def _checked(**changes: Any) -> LightSettings:
-    """LightSettings with ``changes`` over the defaults; a ParamError as argparse's type error."""
-    try:
-        return LightSettings(**changes)
-    except ParamError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def sun_angles(text: str) -> tuple[float, float]:
     """``--sun AZ,EL``: azimuth (degrees counter-clockwise from +x) and elevation (degrees above the
     horizon), checked as ``light.sun``."""
-    parts = text[:_MAX_TEXT + 1].split(",")
-    try:
-        if len(text) > _MAX_TEXT or len(parts) != 2:
-            raise ValueError(text)
-        az, el = (float(p) for p in parts)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected AZ,EL (two numbers in degrees, e.g. 135,50), "
-                                         f"got {text[:_MAX_TEXT]!r}") from None
-    if not (math.isfinite(az) and math.isfinite(el)):
-        raise argparse.ArgumentTypeError(f"light.sun: {text[:_MAX_TEXT]!r} is not two finite numbers")
-    sun: tuple[float, float] = _checked(sun=(az, el)).sun
+    sun: tuple[float, float] = checked_setting(
+        LightSettings, "sun", numbers(text, 2, "AZ,EL (two numbers in degrees, e.g. 135,50)"))
     return sun
 
 
-def exposure(text: str) -> float:
-    """``--exposure EV``: stops (the image is scaled by 2^EV), checked as ``light.exposure``."""
-    try:
-        if len(text) > _MAX_TEXT:
-            raise ValueError(text)
-        x = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number of stops, got {text[:_MAX_TEXT]!r}") from None
-    ev: float = _checked(exposure=x).exposure
-    return ev
+exposure = setting_option(LightSettings, "exposure", "a number of stops")
+"""``--exposure EV``: stops (the image is scaled by 2^EV), checked as ``light.exposure``."""
 
 
 def add_light_arguments(p: argparse.ArgumentParser) -> None:

@@ -230,7 +230,7 @@ def lobes_dict(lobes: Lobes) -> dict[str, Any]:
 
 
 def parse_lobes_field(name: str, value: Any, path: str, outline: tuple[tuple[float, float], ...]) -> Any:
-    """Dispatch for :func:`leafview.core.params._parse_field` on the lobes-specific kinds."""
+    """Dispatch for :func:`leafview.core.params.parse_field` on the lobes-specific kinds."""
     if name == "outline":
         return parse_outline(value, path)
     if name == "valleys":

@@ -454,7 +454,9 @@ def _vector(value: Any, n: int, path: str) -> tuple[float, ...]:
     return tuple(_number(v, f"{path}[{i}]") for i, v in enumerate(value))
 
 
-def _parse_field(value: Any, spec: FieldSpec, path: str, rows: int = 3) -> Any:
+def parse_field(value: Any, spec: FieldSpec, path: str, rows: int = 3) -> Any:
+    """``value`` checked against ``spec`` (by its kind: number, int, bool, choice, vectors, rows,
+    edits) and normalised; a :class:`ParamError` naming ``path`` otherwise."""
     if spec.kind == "choice":
         return check_choice(value, spec, path)
     if spec.kind == "edits":
@@ -517,7 +519,7 @@ def _parse_group(cls: type, data: Any, group: str, *, required: bool) -> Any:
         if spec.kind in ("outline", "points", "turtle"):   # leafview.core.lobes
             values[name] = parse_lobes_field(name, data[name], path, values.get("outline", ()))
             continue
-        values[name] = _parse_field(data[name], spec, path, rows)
+        values[name] = parse_field(data[name], spec, path, rows)
         if name == "silhouette":
             rows = len(values[name])
     obj = cls(**values)

@@ -17,7 +17,8 @@ from collections.abc import Mapping
 from dataclasses import fields, replace
 from typing import Any, TypeVar
 
-from leafview.core.fieldspec import FieldSpec, check_choice, check_range, integer, number
+from leafview.core.fieldspec import FieldSpec
+from leafview.core.params import parse_field
 from leafview.errors import ParamError
 
 __all__ = ["SettingsTable", "field_specs", "check_value"]
@@ -31,27 +32,9 @@ def field_specs(cls: Any) -> dict[str, FieldSpec]:
 
 
 def check_value(value: Any, spec: FieldSpec, path: str) -> Any:
-    """``value`` checked against ``spec`` and normalised (float, int, bool, str or a pair of floats);
-    a :class:`ParamError` naming ``path`` otherwise."""
-    kind = spec.kind
-    if kind == "bool":
-        if not isinstance(value, bool):
-            raise ParamError(path, f"expected true or false, got {type(value).__name__} {value!r}")
-        return value
-    if kind == "int":
-        return integer(value, spec, path)
-    if kind == "choice":
-        return check_choice(value, spec, path)
-    if kind == "pair":
-        if not isinstance(value, (list, tuple)) or len(value) != 2:
-            raise ParamError(path, f"expected two numbers, got {value!r}")
-        out = tuple(number(x, f"{path}[{i}]") for i, x in enumerate(value))
-        for i, x in enumerate(out):
-            check_range(x, spec, f"{path}[{i}]")
-        return out
-    x = number(value, path)
-    check_range(x, spec, path)
-    return x
+    """``value`` checked against ``spec`` and normalised (float, int, bool, str or a pair of floats):
+    the leaf parameters' own field check, :func:`leafview.core.params.parse_field`."""
+    return parse_field(value, spec, path)
 
 
 class SettingsTable:

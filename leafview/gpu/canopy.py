@@ -23,7 +23,6 @@ block's ``flags.z``), a single-sample one keeps the alpha test at 0.5.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 import moderngl
 import numpy as np
@@ -183,7 +182,7 @@ class CanopyRenderer:
         if light.sky:
             self.sky.draw(camera, size)
         if light.ground:
-            self.ground(light.shadows).draw(camera, self._bounds(), size=size, height=self.ground_z)
+            self.ground(light.shadows).draw(camera, scene.bounds, size=size, height=self.ground_z)
         # the passes above may have used the units and bindings since: bind everything again
         self.light_uniforms.bind()
         if light.shadows:
@@ -203,10 +202,6 @@ class CanopyRenderer:
             found.set_contacts(*contacts_of(self.scene.scene))
             self._grounds[shadows] = found
         return found
-
-    def _bounds(self) -> tuple[Any, Any]:
-        lo, hi = self.scene.scene.bounds()
-        return lo, hi
 
     def release(self) -> None:
         """Release the passes (idempotent); the scene renderer stays the caller's."""

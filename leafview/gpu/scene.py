@@ -532,6 +532,9 @@ class SceneRenderer:
                  max_block_bytes: int | None = None, progress: Callable[[int], None] | None = None,
                  resources: GpuResources | None = None, veins: bool = True) -> None:
         self.ctx, self.scene = ctx, scene
+        # the world box of the leaf bases and stems (placement never changes after upload: edits change
+        # Ω only): the shadow and ground passes frame on it every frame without an O(N) pass
+        self.bounds: tuple[NDArray[np.float64], NDArray[np.float64]] = scene.bounds()
         self.grids: tuple[tuple[int, int], ...] = tuple((int(g[0]), int(g[1])) for g in grids)
         if not 1 <= len(self.grids) <= 4:
             raise ValueError("between 1 and 4 levels of detail")

@@ -116,8 +116,7 @@ class ShadowPass:
         count = light.cascades
         limit = int(self.ctx.info["GL_MAX_TEXTURE_SIZE"])
         tile = min(tile, limit // 2) if count != 1 else min(tile, limit)
-        lo, hi = scene.scene.bounds()
-        cascades = shadow_cascades(camera, (lo, hi), light.direction, tile, count)
+        cascades = shadow_cascades(camera, scene.bounds, light.direction, tile, count)
         fbo = self._atlas(cascades.atlas_size)
         previous, viewport = self.ctx.fbo, self.ctx.viewport
         try:

@@ -26,7 +26,6 @@ beyond the paper's three keep their species' values (they are not among the vari
 from __future__ import annotations
 
 import importlib
-import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -35,6 +34,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
+from leafview.core.fieldspec import number
 from leafview.core.params import OMEGA_LIMIT, ParamError
 
 if TYPE_CHECKING:
@@ -54,10 +54,6 @@ _LIMITS = {"width": (1e-3, 10.0), "asymmetry": (-1.0, 1.0), "silhouette": (-1.0,
 _V_LIMIT = 0.5
 
 
-def _number(value: Any, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ParamError(where, f"must be a finite number, got {value!r}")
-    return float(value)
 
 
 @dataclass(frozen=True)
@@ -80,7 +76,7 @@ class SceneEdit:
     def __post_init__(self) -> None:
         if self.op not in EDIT_OPS:
             raise ParamError("op", f"unknown edit {self.op!r} (use {', '.join(EDIT_OPS)})")
-        value = _number(self.value, "value")
+        value = number(self.value, "value")
         lo, hi = _LIMITS[self.op]
         if not lo <= value <= hi:
             raise ParamError("value", f"a {self.op} edit takes a value in [{lo:g}, {hi:g}], got {value!r}")
@@ -100,7 +96,7 @@ class SceneEdit:
         if isinstance(self.row, bool) or not isinstance(self.row, (int, np.integer)) or not 0 <= self.row < SIL_ROWS:
             raise ParamError("row", f"must be a silhouette row 0..{SIL_ROWS - 1}, got {self.row!r}")
         object.__setattr__(self, "row", int(self.row))
-        v = _number(self.v, "v")
+        v = number(self.v, "v")
         if abs(v) > _V_LIMIT:
             raise ParamError("v", f"must be in [-{_V_LIMIT}, {_V_LIMIT}], got {v!r}")
         object.__setattr__(self, "v", v)
