@@ -142,3 +142,21 @@ def test_compact_errors_name_the_field_too():
     with pytest.raises(ParamError) as err:
         C.parse_compact(doc)
     assert err.value.path == "venation.edits[0].angle"
+
+
+@pytest.mark.parametrize("edit, field", [(VeinEdit(99, -1, 5.0, 0.0), "venation.edits[0].vein"),
+                                         (VeinEdit(0, 1, 20.0, 0.0), "venation.edits[0].angle")])
+@pytest.mark.parametrize("command", [["export", "-o", "out.glb", "--backend", "numpy"], ["render", "-o", "out.png"]])
+def test_a_bad_vein_edit_names_the_file_and_writes_nothing(command, edit, field, tmp_path, monkeypatch, capsys):
+    """A vein edit is only checkable against the vein tree and the solved blade, after parsing: the
+    command line checks it before drawing, and the refusal names the input file as well as the
+    field (a missing vein; a turn that folds the blade)."""
+    from leafview.cli import main
+    monkeypatch.chdir(tmp_path)
+    leaf = LeafParams.load(builtin_presets()["acuminate"])
+    leaf = replace(leaf, venation=replace(leaf.venation, enabled=True, edits=(edit,)))
+    Path("in.toml").write_text(dumps_toml(leaf))
+    assert main([command[0], "in.toml", *command[1:]]) == 2
+    err = capsys.readouterr().err
+    assert "in.toml" in err and field in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["in.toml"]
