@@ -23,7 +23,8 @@ def xvfb(log: Path, screen: str = "1280x800x24") -> Iterator[str]:
         raise DisplayUnavailable("Xvfb is not installed (apt-get install xvfb)")
     read_fd, write_fd = os.pipe()
     with open(log, "wb") as err:
-        proc = subprocess.Popen([exe, "-displayfd", str(write_fd), "-screen", "0", screen, "-nolisten", "tcp"],
+        proc = subprocess.Popen([exe, "-displayfd", str(write_fd), "-screen", "0", screen, "-nolisten", "tcp",
+                                 "-noreset"],   # no server reset (refusing connections) when the last client leaves
                                 pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=err)
     os.close(write_fd)
     try:
