@@ -49,6 +49,13 @@ def _run(args: list[str], display: str, cwd: Path, timeout: int = 120) -> subpro
     return subprocess.run(args, cwd=cwd, env=_env(display), capture_output=True, text=True, timeout=timeout)
 
 
+def _session(script: str, display: str, cwd: Path) -> dict:
+    """Run a scripted window session in a new Python process; its last stdout line is JSON."""
+    result = _run([sys.executable, "-c", script], display, cwd)
+    assert result.returncode == 0, result.stderr[-3000:]
+    return json.loads(result.stdout.strip().splitlines()[-1])
+
+
 def test_scripted_run_writes_the_whole_window(gl, display, tmp_path):
     exe = shutil.which("leafview") or pytest.fail("the leafview console script is not installed")
     out = tmp_path / "window.png"
@@ -184,9 +191,7 @@ SESSION = textwrap.dedent('''
 
 
 def test_window_session_edits_undo_resize_and_close(gl, display, tmp_path):
-    result = _run([sys.executable, "-c", SESSION], display, tmp_path)
-    assert result.returncode == 0, result.stderr[-3000:]
-    out = json.loads(result.stdout.strip().splitlines()[-1])
+    out = _session(SESSION, display, tmp_path)
     assert out["errors"] == [] and out["gl_errors"] == []  # ctx.error after every frame
     assert out["window_fb"] == [900, 560]
     assert 0 < out["upload_bytes"] < 1024
@@ -256,9 +261,7 @@ WIND_SESSION = textwrap.dedent('''
 
 
 def test_wind_plays_with_the_wall_clock_in_a_window(gl, display, tmp_path):
-    result = _run([sys.executable, "-c", WIND_SESSION], display, tmp_path)
-    assert result.returncode == 0, result.stderr[-3000:]
-    out = json.loads(result.stdout.strip().splitlines()[-1])
+    out = _session(WIND_SESSION, display, tmp_path)
     for name in ("scene", "leaf"):
         advanced, elapsed, moved, errors = out[name]
         # the wind's time is the wall clock's between the frames (each frame's interval, capped at 1 s)
