@@ -36,7 +36,7 @@ from leafview.scene.camera import VIEWS, check_leaf_framable
 __all__ = ["EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_INTERRUPTED", "VIEWS", "count", "int_in_range", "int_pair",
            "pixels", "image_size", "output_path", "window_size", "grid", "builtin_names", "expand_presets",
            "preset_file", "load_leaf_files", "load_framable_leaves", "refuse_directory", "output_directory", "output_names", "report", "progress_bar",
-           "VEINS", "add_veins_argument", "veins_off"]
+           "VEINS", "add_veins_argument", "veins_off", "MAX_NUMBER_TEXT", "numbers", "checked_setting", "setting_option"]
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 EXIT_INTERRUPTED = 130   # Ctrl-C, as a shell reports SIGINT
@@ -74,19 +74,19 @@ def int_in_range(text: str, *, lo: int, hi: int | None, what: str, name: str) ->
     return n
 
 
-_MAX_NUMBER_TEXT = 60
+MAX_NUMBER_TEXT = 60
 
 
 def numbers(text: str, count: int, what: str) -> tuple[float, ...]:
     """``count`` comma-separated numbers for argparse (not checked for finiteness: the setting
     they go to says what it accepts); a type error naming ``what`` otherwise."""
-    parts = text[:_MAX_NUMBER_TEXT + 1].split(",")
+    parts = text[:MAX_NUMBER_TEXT + 1].split(",")
     try:
-        if len(text) > _MAX_NUMBER_TEXT or len(parts) != count:
+        if len(text) > MAX_NUMBER_TEXT or len(parts) != count:
             raise ValueError(text)
         return tuple(float(p) for p in parts)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected {what}, got {text[:_MAX_NUMBER_TEXT]!r}") from None
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text[:MAX_NUMBER_TEXT]!r}") from None
 
 
 def checked_setting(settings: type[SettingsTable], name: str, value: Any) -> Any:
@@ -182,10 +182,10 @@ def load_leaf_files(paths: Sequence[Path]) -> list[LeafParams]:
 
 
 def _checked_veins(leaf: LeafParams, path: Path) -> LeafParams:
-    """``leaf``, its vein tree and vein edits checked now (:func:`check_veins`, and the blade's
-    folding by :func:`shape_grid`, cached for the drawing that follows), so that a refusal names
-    the file before anything is drawn or written."""
-    if leaf.venation.enabled or leaf.venation.edits:
+    """``leaf``'s vein edits checked now (the vein each names, :func:`check_veins`; the blade's
+    folding, :func:`shape_grid`, cached for the drawing that follows), so that a refusal names the
+    file before anything is drawn or written. Leaves without edits cost nothing here."""
+    if leaf.venation.edits:
         try:
             check_veins(leaf)
             shape_grid(leaf)

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from leafview.atomic import atomic_output, check_folder, check_target, outputs
-from leafview.cli.args import numbers, setting_option
+from leafview.cli.args import MAX_NUMBER_TEXT, numbers, setting_option
 from leafview.deform.wind import WindSettings
 from leafview.errors import OutputError, OutputPathError, UsageError
 from leafview.export.images import write_image
@@ -61,7 +61,7 @@ def frame_rate(text: str) -> float:
     """``--fps FPS``: frames per second of an animation, in (0, 240]."""
     x = numbers(text, 1, "frames per second")[0]
     if not 0.0 < x <= MAX_FPS:   # NaN fails this too
-        raise argparse.ArgumentTypeError(f"--fps must lie in (0, {MAX_FPS:g}], got {text[:60]!r}")
+        raise argparse.ArgumentTypeError(f"--fps must lie in (0, {MAX_FPS:g}], got {text[:MAX_NUMBER_TEXT]!r}")
     return x
 
 

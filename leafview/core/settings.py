@@ -21,7 +21,7 @@ from leafview.core.fieldspec import FieldSpec
 from leafview.core.params import parse_field
 from leafview.errors import ParamError
 
-__all__ = ["SettingsTable", "field_specs", "check_value"]
+__all__ = ["SettingsTable", "field_specs"]
 
 S = TypeVar("S", bound="SettingsTable")
 
@@ -29,12 +29,6 @@ S = TypeVar("S", bound="SettingsTable")
 def field_specs(cls: Any) -> dict[str, FieldSpec]:
     """``{name: FieldSpec}`` of a settings class's fields, in declaration order."""
     return {f.name: f.metadata["spec"] for f in fields(cls) if "spec" in f.metadata}
-
-
-def check_value(value: Any, spec: FieldSpec, path: str) -> Any:
-    """``value`` checked against ``spec`` and normalised (float, int, bool, str or a pair of floats):
-    the leaf parameters' own field check, :func:`leafview.core.params.parse_field`."""
-    return parse_field(value, spec, path)
 
 
 class SettingsTable:
@@ -46,7 +40,7 @@ class SettingsTable:
 
     def __post_init__(self) -> None:
         for name, spec in field_specs(type(self)).items():
-            object.__setattr__(self, name, check_value(getattr(self, name), spec, f"{self.TABLE}.{name}"))
+            object.__setattr__(self, name, parse_field(getattr(self, name), spec, f"{self.TABLE}.{name}"))
         self.check()
 
     def check(self) -> None:
@@ -63,7 +57,7 @@ class SettingsTable:
         for key in data:
             if key not in specs:
                 raise ParamError(f"{where}.{key}", f"unknown setting (known: {', '.join(specs)})")
-        values = {k: check_value(v, specs[k], f"{where}.{k}") for k, v in data.items()}
+        values = {k: parse_field(v, specs[k], f"{where}.{k}") for k, v in data.items()}
         try:
             return cls(**values)
         except ParamError as exc:

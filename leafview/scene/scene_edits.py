@@ -54,8 +54,6 @@ _LIMITS = {"width": (1e-3, 10.0), "asymmetry": (-1.0, 1.0), "silhouette": (-1.0,
 _V_LIMIT = 0.5
 
 
-
-
 @dataclass(frozen=True)
 class SceneEdit:
     """One scene-wide edit (the module docstring says what each ``op`` does).
