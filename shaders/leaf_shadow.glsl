@@ -13,7 +13,9 @@
 // (percentage-closer filtering): a 4 x 4-texel footprint with separable weights (1 - f, 1, 1, f) / 3
 // per axis (f the point's bilinear fraction), read as four textureGather compares (16 texels, the
 // same values as nine bilinear taps' 36 fetches). The footprint is kept inside the cascade's tile
-// (the point clamped 1.5 texels inside). Without cascades (params.x = 0) all is lit.
+// (the point clamped 1.5 texels inside). With SHADOW_FAST (the "fast" shadow filter) the one
+// bilinear depth-compare tap at the point replaces the 3 x 3: the hardware's filtering of texels
+// c..c+1, a quarter of the texture reads. Without cascades (params.x = 0) all is lit.
 #include "generated/shadow_block.glsl"
 
 layout(binding = SHADOW_UNIT) uniform sampler2DShadow sun_shadow;
@@ -46,6 +48,9 @@ float shadow_lookup(int k, vec3 s, float texel) {
     vec2 t = clamp(origin + s.xy * tile - 0.5, origin + 1.0, origin + (tile - 2.0));
     vec2 c = floor(t), f = t - c, g = 1.0 - f;
     vec2 inv = 1.0 / vec2(textureSize(sun_shadow, 0));
+#ifdef SHADOW_FAST
+    return texture(sun_shadow, vec3((t + 0.5) * inv, ref));
+#endif
     // four depth-compare gathers (texels c-1..c and c+1..c+2 per axis; components (0,1) (1,1) (1,0)
     // (0,0)) weighted by the nine bilinear taps' sums: g, 1, 1, f per axis
     vec4 a = textureGather(sun_shadow, c * inv, ref);

@@ -18,8 +18,9 @@ from leafview.cli.scene_look import add_light_arguments, light_from_args
 from leafview.core.defaults import DEFAULT_GRID
 from leafview.core.params import LeafParams, Transform
 from leafview.core.texture import LeafTexture, with_folder
+from leafview.deform.wind import WindSettings
 from leafview.export.images import write_image
-from leafview.gpu.canopy import CanopyRenderer
+from leafview.gpu.canopy import CanopyRenderer, canopy_defines, resolve_shadow_filter
 from leafview.gpu.scene import CullSettings, SceneRenderer, single_leaf_scene
 from leafview.gpu.targets import RenderTarget
 from leafview.resources import builtin_presets
@@ -51,6 +52,7 @@ def test_light_options_override_the_file():
     assert light_from_args(_parse(), base) == base
     assert light_from_args(_parse("--sky", "on", "--ssao", "on", "--exposure", "-1.5"), None) == \
         LightSettings(ssao=True, exposure=-1.5)
+    assert light_from_args(_parse("--shadow-filter", "fast"), base) == base.replace(shadow_filter="fast")
 
 
 @pytest.mark.parametrize("argv, says", [
@@ -59,7 +61,7 @@ def test_light_options_override_the_file():
     (("--sun", "400,40"), "light.sun[0]"), (("--exposure", "nan"), "light.exposure"),
     (("--exposure", "1e400"), "light.exposure"), (("--exposure", "11"), "light.exposure"),
     (("--exposure", "bright"), "stops"), (("--shadows", "yes"), "invalid choice"),
-    (("--tone", "aces"), "invalid choice"),
+    (("--tone", "aces"), "invalid choice"), (("--shadow-filter", "pcf"), "invalid choice"),
 ])
 def test_bad_light_options_exit_2(argv, says, capsys):
     p = argparse.ArgumentParser(prog="leafview scene")
@@ -231,14 +233,27 @@ def test_ambient_occlusion_only_darkens(gl):
 
 
 # -- reference images ---------------------------------------------------------------------------
-def test_reference_sun_and_shadow(gl, request):
-    """A 300-leaf plant in the default light: sun, shadows, sky and ground (looked at)."""
+@pytest.mark.parametrize("shadow_filter", ["soft", "fast"])
+def test_reference_sun_and_shadow(gl, request, shadow_filter):
+    """A 300-leaf plant in the default light: sun, shadows, sky and ground (looked at), with each
+    shadow filter (the default "auto" is one or the other by renderer)."""
     scene = build_scene(SceneSpec(species=(LeafParams.load(builtin_presets()["ovate"]),), leaves=300,
                                   layout="plant", seed=4))
     size = (128, 96)
-    with SceneRenderer(gl.ctx, scene, resources=gl.resources) as r, CanopyRenderer(r) as c:
+    with SceneRenderer(gl.ctx, scene, resources=gl.resources) as r, \
+            CanopyRenderer(r, LightSettings(shadow_filter=shadow_filter)) as c:
         image = c.render(scene_camera(scene, size), size, samples=4)
-    assert_matches_reference(image, "canopy_sun_shadow", request)
+    assert_matches_reference(image, "canopy_sun_shadow" + ("_fast" if shadow_filter == "fast" else ""), request)
+
+
+def test_auto_shadow_filter_is_fast_on_a_cpu_rasteriser_only():
+    cpu, gpu = "llvmpipe (LLVM 15.0.6, 256 bits)", "NVIDIA H200/PCIe/SSE2"
+    assert resolve_shadow_filter("auto", cpu) == "fast" and resolve_shadow_filter("auto", gpu) == "soft"
+    assert resolve_shadow_filter("soft", cpu) == "soft" and resolve_shadow_filter("fast", gpu) == "fast"
+    auto = canopy_defines(LightSettings(), WindSettings(), cpu)
+    assert auto == canopy_defines(LightSettings(shadow_filter="fast"), WindSettings(), gpu)
+    assert auto["SHADOW_FAST"] == 1 and "SHADOW_FAST" not in canopy_defines(LightSettings(), WindSettings(), gpu)
+    assert "SHADOW_FAST" not in canopy_defines(LightSettings(shadows=False), WindSettings(), cpu)
 
 
 def test_reference_back_light(gl, request):

@@ -50,6 +50,7 @@ def _refused(tmp_path: Path, capsys: pytest.CaptureFixture[str], argv: list[str]
     ("[light]\nsunshine = 1.0\n", ("light.sunshine", "unknown")),
     ("[wind]\ngusts = 2\n", ("wind.gusts", "unknown")),
     ("[light]\nexposure = nan\n", ("light.exposure",)),
+    ("[light]\nshadow_filter = \"pcf\"\n", ("light.shadow_filter",)),
 ])
 def test_a_bad_light_or_wind_table_exits_2_naming_the_field_and_the_file(tmp_path, capsys, table, words):
     bad = tmp_path / "bad.toml"

@@ -21,7 +21,7 @@ frame (at most :data:`MAX_MARKERS` of them, projected in numpy: no extra scene p
 Light and wind start from the scene file's ``[light]`` and ``[wind]`` and are changed live in
 the panel: **Light** has a widget per :class:`~leafview.scene.lighting.LightSettings` field (sun
 shadows, sun azimuth and elevation, intensity, sky, ground, exposure, tone map, transmission,
-gloss, ambient occlusion, alpha to coverage, shadow map size and cascades); **Wind** has *play
+gloss, ambient occlusion, alpha to coverage, shadow map size, cascades and filter); **Wind** has *play
 wind* (play/pause) and sliders for speed, direction, gustiness λ (Geng, Hu & Zhang 2014, eq. 5) and
 blade flutter. While the wind plays, its time advances with the wall clock each frame: only the
 Wind uniform block changes (no rebuild). **Save** writes the current light and wind into the

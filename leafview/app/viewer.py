@@ -46,21 +46,16 @@ from leafview.app.wind_panel import advance_wind
 from leafview.botany.leaf_surface import drawn_grid, grid_points
 from leafview.core.params import LeafParams
 from leafview.export.images import ImageWriteError, write_image
+from leafview.gpu.context import is_software
 from leafview.gpu.renderer import LeafRenderer, Lighting
 from leafview.gpu.targets import RenderTarget
 from leafview.gpu.wind import WindUniforms, wind_defines
 from leafview.resources import builtin_presets, preset_dir
 
-__all__ = ["Viewer", "PANEL_WIDTH", "BACKGROUND", "open_state", "is_software"]
+__all__ = ["Viewer", "PANEL_WIDTH", "BACKGROUND", "open_state"]
 
 PANEL_WIDTH = 400
 BACKGROUND = (0.115, 0.125, 0.14, 1.0)
-
-
-def is_software(gl_renderer: str) -> bool:
-    """Whether ``GL_RENDERER`` names a CPU rasteriser (Mesa llvmpipe/softpipe, SwiftShader)."""
-    name = gl_renderer.lower()
-    return any(s in name for s in ("llvmpipe", "softpipe", "swiftshader", "software"))
 
 
 def begin_io(window_size: tuple[int, int], fb_size: tuple[int, int] | None,

@@ -1,7 +1,7 @@
 """``leafview scene``: build a scene of many leaves, render it offscreen, save it, or view it.
 
 Images are drawn with the canopy look (:class:`~leafview.gpu.canopy.CanopyRenderer`: sun and
-shadows, sky, ground, tone mapping; ``--shadows/--sun/--sky/--ground/--exposure/--ssao/--tone``
+shadows, sky, ground, tone mapping; ``--shadows/--sun/--sky/--ground/--exposure/--ssao/--tone/--shadow-filter``
 and the scene file's ``[light]`` table) in the wind of ``--wind/--wind-dir/--time`` (``[wind]``).
 
 Examples::

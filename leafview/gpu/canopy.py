@@ -30,7 +30,8 @@ from numpy.typing import NDArray
 
 from leafview.deform.wind import WindSettings
 from leafview.errors import GLUnavailable
-from leafview.gpu.context import check_error
+from leafview.gpu.context import check_error, is_software
+from leafview.gpu.layout import shadow_defines
 from leafview.gpu.light import LightUniforms
 from leafview.gpu.limits import ensure_alive
 from leafview.gpu.owner import GLObjects
@@ -43,18 +44,27 @@ from leafview.scene.camera import Camera
 from leafview.scene.lighting import LightSettings
 from leafview.scene.sky import contacts_of, ground_height
 
-__all__ = ["CanopyRenderer", "canopy_defines", "MIN_GL_VERSION", "BACKGROUND"]
+__all__ = ["CanopyRenderer", "canopy_defines", "resolve_shadow_filter", "MIN_GL_VERSION", "BACKGROUND"]
 
 MIN_GL_VERSION = 450   # sample masks, depth-compare samplers, multisampled targets
 BACKGROUND = (0.0, 0.0, 0.0, 0.0)   # without a sky: transparent, as SceneRenderer.render
 _LIGHT, _WIND, _CULL = LightSettings(), WindSettings(), CullSettings()   # the defaults
 
 
-def canopy_defines(light: LightSettings, wind: WindSettings) -> dict[str, object]:
-    """The program defines of the leaves' draw for ``light`` and ``wind``."""
-    defines: dict[str, object] = {"LEAF_CANOPY": 1}
-    if light.shadows:
-        defines["LEAF_SHADOWS"] = 1
+def resolve_shadow_filter(shadow_filter: str, gl_renderer: str) -> str:
+    """The shadow filter a renderer named ``gl_renderer`` uses for the setting ``shadow_filter``:
+    ``"auto"`` is ``"soft"`` on a GPU and ``"fast"`` on a CPU rasteriser (the 3 × 3 filter's four
+    gathers cost llvmpipe about as much again as the shadow maps: ``leafview bench canopy``)."""
+    if shadow_filter != "auto":
+        return shadow_filter
+    return "fast" if is_software(gl_renderer) else "soft"
+
+
+def canopy_defines(light: LightSettings, wind: WindSettings, gl_renderer: str = "") -> dict[str, object]:
+    """The program defines of the leaves' draw for ``light`` and ``wind`` on ``gl_renderer`` (which
+    resolves an ``"auto"`` shadow filter; empty: a GPU's)."""
+    shadow_filter = resolve_shadow_filter(light.shadow_filter, gl_renderer)
+    defines: dict[str, object] = {"LEAF_CANOPY": 1, **shadow_defines(light.shadows, shadow_filter)}
     if light.ssao:
         defines["LEAF_SSAO"] = 1
     defines.update(wind_defines(wind))
@@ -84,7 +94,8 @@ class CanopyRenderer:
                                 f"(sample masks, shadow samplers); this context is {version // 100}.{version % 100 // 10}")
         self._objects = GLObjects()
         self.ssao: SsaoPass | None = None
-        self._grounds: dict[bool, GroundPass] = {}   # without and with the sun's shadow maps
+        self._grounds: dict[tuple[bool, str], GroundPass] = {}   # without and with the shadow maps (per filter)
+        self.gl_renderer = str(self.ctx.info.get("GL_RENDERER", ""))
         try:
             self.light_uniforms = self._objects.own(LightUniforms(self.ctx))
             self.shadow = self._objects.own(ShadowPass(self.ctx))
@@ -182,7 +193,7 @@ class CanopyRenderer:
         if light.sky:
             self.sky.draw(camera, size)
         if light.ground:
-            self.ground(light.shadows).draw(camera, scene.bounds, size=size, height=self.ground_z)
+            self.ground(light.shadows, resolve_shadow_filter(light.shadow_filter, self.gl_renderer)).draw(camera, scene.bounds, size=size, height=self.ground_z)
         # the passes above may have used the units and bindings since: bind everything again
         self.light_uniforms.bind()
         if light.shadows:
@@ -191,16 +202,18 @@ class CanopyRenderer:
             assert self.ssao is not None
             self.ssao.bind()
         self.wind_uniforms.bind(scene)
-        scene.draw(settings, defines=canopy_defines(light, self.wind))
+        scene.draw(settings, defines=canopy_defines(light, self.wind, self.gl_renderer))
 
-    def ground(self, shadows: bool) -> GroundPass:
-        """The ground pass with or without the sun's shadow maps (made on first use, with the
-        scene's contact points)."""
-        found = self._grounds.get(shadows)
+    def ground(self, shadows: bool, shadow_filter: str = "soft") -> GroundPass:
+        """The ground pass with or without the sun's shadow maps, read with ``shadow_filter``
+        (made on first use, with the scene's contact points)."""
+        key = (bool(shadows), shadow_filter if shadows else "")
+        found = self._grounds.get(key)
         if found is None:
-            found = self._objects.own(GroundPass(self.ctx, shadows=shadows, programs=self.scene.resources.programs))
+            found = self._objects.own(GroundPass(self.ctx, shadows=shadows, shadow_filter=shadow_filter,
+                                                 programs=self.scene.resources.programs))
             found.set_contacts(*contacts_of(self.scene.scene))
-            self._grounds[shadows] = found
+            self._grounds[key] = found
         return found
 
     def release(self) -> None:

@@ -13,7 +13,7 @@ import moderngl
 from leafview.errors import GLContextLost, GLUnavailable
 
 __all__ = ["GLUnavailable", "create_headless_context", "acquire_headless_context", "recycle_headless_context",
-           "REQUIRED_GL", "check_error"]
+           "REQUIRED_GL", "check_error", "is_software"]
 
 REQUIRED_GL = 450
 
@@ -100,3 +100,9 @@ def check_error(ctx: moderngl.Context, where: str) -> None:
     err = ctx.error
     if err != "GL_NO_ERROR":
         raise GLContextLost(f"OpenGL error after {where}: {err}")
+
+
+def is_software(gl_renderer: str) -> bool:
+    """Whether ``GL_RENDERER`` names a CPU rasteriser (Mesa llvmpipe/softpipe, SwiftShader)."""
+    name = gl_renderer.lower()
+    return any(s in name for s in ("llvmpipe", "softpipe", "swiftshader", "software"))

@@ -54,7 +54,7 @@ __all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "LIGHT_BLOCK", "SHADOW_BLOCK", 
            "VEIN_TILES_BINDING", "VEIN_FIELD_SAMPLER", "VEIN_GRID_SAMPLER", "LOBE_UNIT", "LOBE_SAMPLER",
            "Slot", "LEAF_SLOTS", "BRANCH_RIPPLE", "BRANCH_BEND", "BRANCH_ROWS", "BRANCH_LOBE", "branch_code", "branch_parts", "without_derived", "PAIR_MEMBERS", "read_slot", "write_slot", "read_pair", "accessors_glsl",
            "struct_from_dtype", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources",
-           "texture_keys", "texture_layers", "write_texture_layers", "texture_defines", "PLAIN_DEFINES",
+           "texture_keys", "texture_layers", "write_texture_layers", "texture_defines", "PLAIN_DEFINES", "shadow_defines",
            "write_vein_layers", "vein_defines", "NO_VEIN_DEFINES", "VEIN_SKIN_DEFINES",
            "write_lobe_layers", "lobe_defines", "NO_LOBE_DEFINES", "LOBE_TABLE_ROWS",
            "AovOutput", "AOV_OUTPUTS", "LEAF_OFFSET_UNIFORM", "aov_outputs_glsl",
@@ -657,6 +657,19 @@ def texture_defines(records: np.ndarray) -> dict[str, int]:
     :func:`feature_defines`, whose permutations cover the vertex stage only."""
     recs = np.atleast_1d(records)
     return {} if (read_slot(recs, "leaf_front_layer") >= 0).any() else dict(PLAIN_DEFINES)
+
+
+def shadow_defines(shadows: bool, shadow_filter: str = "soft") -> dict[str, int]:
+    """The defines of a program that reads the sun's shadow maps (``leaf_shadow.glsl``):
+    ``LEAF_SHADOWS``, with ``SHADOW_FAST`` for the ``"fast"`` filter (one bilinear tap instead of
+    the 3 × 3 percentage-closer filter; :data:`leafview.scene.lighting.SHADOW_FILTERS`, ``"auto"``
+    resolved by the caller: :func:`leafview.gpu.canopy.resolve_shadow_filter`). None without
+    shadows."""
+    if shadow_filter not in ("soft", "fast"):
+        raise ValueError(f"shadow_filter {shadow_filter!r}: 'soft' or 'fast' ('auto' is resolved by the renderer)")
+    if not shadows:
+        return {}
+    return {"LEAF_SHADOWS": 1, **({"SHADOW_FAST": 1} if shadow_filter == "fast" else {})}
 
 
 PLAIN_DEFINES: Mapping[str, int] = MappingProxyType({"LEAF_NO_TEXTURE": 1})

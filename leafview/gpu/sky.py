@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from leafview.errors import ParamError
 from leafview.gpu.frame import FrameUniforms
+from leafview.gpu.layout import shadow_defines
 from leafview.gpu.owner import GLObjects
 from leafview.gpu.programs import ProgramCache
 from leafview.scene.camera import Camera
@@ -120,13 +121,14 @@ class GroundPass(_FullScreen):
     """The ground plane (``ground.frag``), lit by the Light block's sun and sky, with contact
     shadows at :meth:`set_contacts`'s points, and with ``shadows`` the sun's shadow maps
     (``leaf_shadow.glsl``, bound by :class:`leafview.gpu.shadow.ShadowPass`). Writes colour (alpha 1)
-    and depth; draw it after the sky and before the leaves."""
+    and depth; draw it after the sky and before the leaves. ``shadow_filter``: as the leaves'
+    (:data:`leafview.scene.lighting.SHADOW_FILTERS`)."""
 
-    def __init__(self, ctx: moderngl.Context, *, shadows: bool = False, programs: ProgramCache | None = None) -> None:
+    def __init__(self, ctx: moderngl.Context, *, shadows: bool = False, shadow_filter: str = "soft",
+                 programs: ProgramCache | None = None) -> None:
         defines: dict[str, object] = {"GROUND_MAX_CONTACTS": MAX_CONTACTS, "GROUND_CONTACT_CELLS": CONTACT_CELLS,
-                                      "GROUND_CONTACT_ITEMS": CONTACT_ITEMS, "GROUND_CONTACT_REACH": repr(float(CONTACT_REACH))}
-        if shadows:
-            defines["LEAF_SHADOWS"] = 1
+                                      "GROUND_CONTACT_ITEMS": CONTACT_ITEMS, "GROUND_CONTACT_REACH": repr(float(CONTACT_REACH)),
+                                      **shadow_defines(shadows, shadow_filter)}
         super().__init__(ctx, "ground.frag", defines, programs)
         self.shadows = bool(shadows)
         self.contacts = np.zeros((0, 3))

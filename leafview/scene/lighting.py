@@ -19,10 +19,14 @@ from leafview.core.fieldspec import spec_field
 from leafview.core.settings import SettingsTable
 from leafview.errors import ParamError
 
-__all__ = ["LightSettings", "sun_direction", "TONE_MAPS"]
+__all__ = ["LightSettings", "sun_direction", "TONE_MAPS", "SHADOW_FILTERS"]
 
 _G = "light"
 TONE_MAPS = ("filmic", "linear")
+# the shadow maps' filter (leafview.scene.sun.visibility): "soft" the 3 × 3 percentage-closer
+# filter, "fast" one bilinear depth-compare tap (2 × 2 texels; about half the lookup's cost on a CPU
+# rasteriser), "auto" soft on a GPU and fast on a CPU rasteriser (Mesa llvmpipe)
+SHADOW_FILTERS = ("auto", "soft", "fast")
 
 
 @dataclass(frozen=True)
@@ -46,6 +50,8 @@ class LightSettings(SettingsTable):
     shadow_size: int = spec_field("shadow map size (texels)", _G, 512, 4096, 256, hard=(256, 8192), kind="int",
                                   default=2048)
     cascades: int = spec_field("shadow cascades (0: automatic)", _G, 0, 4, 1, hard=(0, 4), kind="int", default=0)
+    shadow_filter: str = spec_field("shadow filter", _G, 0, 1, 1, kind="choice", choices=SHADOW_FILTERS,
+                                    default="auto")
 
     def check(self) -> None:
         az, el = self.sun

@@ -29,7 +29,10 @@ normal and sun), and toward the sun by ``depth_bias`` texels, then compared with
 depth-compare taps one texel apart (percentage-closer filtering, Reeves, Salesin & Cook 1987):
 a 4 × 4-texel footprint weighted ``(1 - f, 1, 1, f) / 3`` per axis (``f`` the bilinear fraction),
 which the shader reads as four depth-compare gathers; the footprint stays inside the cascade's
-tile (the point clamped 1.5 texels inside its edges).
+tile (the point clamped 1.5 texels inside its edges). The ``"fast"`` filter
+(:data:`~leafview.scene.lighting.SHADOW_FILTERS`) takes the one bilinear tap at the point instead
+(texels ``c … c + 1``, weights ``1 - f, f`` per axis: the hardware's depth-compare filtering),
+which costs the shader one texture read instead of four.
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from leafview.errors import ParamError
 from leafview.scene.camera import Camera
+from leafview.scene.lighting import SHADOW_FILTERS
 
 __all__ = ["MAX_CASCADES", "SPLIT_BLEND", "FADE", "DEPTH_BIAS", "NORMAL_OFFSET", "DEPTH_MARGIN", "Cascades",
            "clip_planes", "depth_range", "cascade_count", "cascade_splits", "atlas_layout", "tile_origin",
@@ -259,9 +263,27 @@ def _pcf(atlas: NDArray[np.float64], t: NDArray[np.float64], ref: NDArray[np.flo
     return total / 9.0
 
 
+def _bilinear(atlas: NDArray[np.float64], t: NDArray[np.float64], ref: NDArray[np.float64]) -> NDArray[np.float64]:
+    """One bilinear ``ref <= depth`` tap at the atlas texel coordinates ``t`` (N, 2; texel centres at
+    integers): texels ``c … c + 1`` per axis weighted ``1 - f, f``, as the shader's depth-compare
+    ``texture()`` filters them."""
+    h, w = atlas.shape
+    c = np.floor(t)
+    f = t - c
+    ci = c.astype(np.int64)
+    total = np.zeros(len(t))
+    for dj in range(2):
+        y = np.clip(ci[:, 1] + dj, 0, h - 1)
+        wy = f[:, 1] if dj else 1.0 - f[:, 1]
+        for di in range(2):
+            wx = f[:, 0] if di else 1.0 - f[:, 0]
+            total += wx * wy * (ref <= atlas[y, np.clip(ci[:, 0] + di, 0, w - 1)])
+    return total
+
+
 def _cascade_visibility(k: int, count: int, world: NDArray[np.float64], n: NDArray[np.float64],
                         cos_l: NDArray[np.float64], atlas: NDArray[np.float64], matrices: NDArray[np.float64],
-                        tile: int, depth_bias: float, normal_offset: float) -> NDArray[np.float64]:
+                        tile: int, depth_bias: float, normal_offset: float, fast: bool) -> NDArray[np.float64]:
     """Visibility in cascade ``k`` (-1 where its square does not cover the point)."""
     m = matrices[k]
     texel = 2.0 / (np.linalg.norm(m[0, :3]) * tile)
@@ -273,18 +295,22 @@ def _cascade_visibility(k: int, count: int, world: NDArray[np.float64], n: NDArr
     ref = np.clip(s[:, 2] - depth_bias * texel * 0.5 * np.linalg.norm(m[2, :3]), 0.0, 1.0)
     origin = np.array(tile_origin(k), np.float64) * tile
     t = np.clip(origin + s[:, :2] * tile - 0.5, origin + 1.0, origin + (tile - 2.0))
-    total = _pcf(atlas, t, ref)
+    total = _bilinear(atlas, t, ref) if fast else _pcf(atlas, t, ref)
     return np.where(covered, total, -1.0)
 
 
 def visibility(world: ArrayLike, normals: ArrayLike, view_depth: ArrayLike, atlas: ArrayLike,
                matrices: ArrayLike, splits: ArrayLike, tile: int, *, depth_bias: float = DEPTH_BIAS,
-               normal_offset: float = NORMAL_OFFSET) -> NDArray[np.float64]:
+               normal_offset: float = NORMAL_OFFSET, shadow_filter: str = "soft") -> NDArray[np.float64]:
     """(N,) sun visibility, 0 shadowed … 1 lit, of fragments at ``world`` (N, 3) with
     ``normals`` (N, 3) at view depths ``view_depth`` (N,), from the depth ``atlas`` (H, W; row 0
     at texture v = 0, as a depth texture reads back) of the cascades' ``matrices`` (count, 4, 4)
-    and ``splits`` (count,): what ``sun_visibility`` of ``shaders/leaf_shadow.glsl`` returns (see
-    the module docstring). No cascade: everything lit."""
+    and ``splits`` (count,), filtered by ``shadow_filter`` (``"soft"`` or ``"fast"``): what
+    ``sun_visibility`` of ``shaders/leaf_shadow.glsl`` returns (see the module docstring). No
+    cascade: everything lit."""
+    if shadow_filter not in SHADOW_FILTERS[1:]:
+        raise ValueError(f"shadow_filter {shadow_filter!r}: choose from {', '.join(SHADOW_FILTERS[1:])} "
+                         "(a renderer resolves 'auto')")
     world = np.asarray(world, np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, np.float64).reshape(-1, 3)
     depth = np.asarray(view_depth, np.float64).reshape(-1)
@@ -301,8 +327,8 @@ def visibility(world: ArrayLike, normals: ArrayLike, view_depth: ArrayLike, atla
     nrm = np.where((cos_l < 0.0)[:, None], -nrm, nrm)
     cos_l = np.abs(cos_l)
     first = np.minimum(np.searchsorted(spl[:count - 1], depth, side="left"), count - 1)
-    vis = [_cascade_visibility(k, count, world, nrm, cos_l, atl, mats, tile, depth_bias, normal_offset)
-           for k in range(count)]
+    vis = [_cascade_visibility(k, count, world, nrm, cos_l, atl, mats, tile, depth_bias, normal_offset,
+                               shadow_filter == "fast") for k in range(count)]
     chosen = np.full(len(world), -1, np.int64)
     for k in range(count):
         pick = (chosen < 0) & (k >= first) & (vis[k] >= 0.0)
