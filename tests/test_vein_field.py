@@ -45,6 +45,7 @@ from leafview.gpu import vein_field as gpu_vein_field
 from leafview.gpu.programs import ProgramCache
 from leafview.gpu.vein_field import LIST_START, VeinFields
 from leafview.resources import builtin_presets
+from leafview.scene.camera import frame_view
 
 DIST_TOL = 5e-7   # float32 distances of O(0.05), squared on the GPU (seen: 7e-8)
 
@@ -353,6 +354,49 @@ def test_a_failed_update_leaves_no_layer_claiming_a_key(fields, monkeypatch):
     seg = vein_segments(b)
     _assert_matches_twin(fields.read(int(fields.layers[1])), seg.uv0, seg.uv1, seg.order, seg.width,
                          halfwidth_table(b))
+
+
+@pytest.mark.gl
+def test_a_geometry_only_update_writes_the_grid_and_leaves_the_field_for_later(fields):
+    """shading=False (geometry capture): the vein grid is written, no field is computed; the next
+    update that shades computes just that field, equal to the twin."""
+    a, b = (_veined("ovate", seed=s, tertiary=4.0) for s in range(2))
+    fields.reserve(2)   # room for both (a larger array would start empty)
+    assert fields.update([a], shading=False) == 0 and fields.computed == 0
+    layer = int(fields.layers[0])
+    assert fields.grid is not None
+    grid = np.frombuffer(fields.grid.read(), np.float32).reshape(fields.capacity, GRID_N, GRID_N, 4)[layer]
+    np.testing.assert_allclose(grid, vein_grid(a, GRID_N, GRID_N), atol=1e-6)
+    assert fields.update([a]) == 1 and fields.computed == 1 and int(fields.layers[0]) == layer
+    seg = vein_segments(a)
+    _assert_matches_twin(fields.read(layer), seg.uv0, seg.uv1, seg.order, seg.width, halfwidth_table(a))
+    assert fields.update([a]) == 0                        # held and shaded: nothing again
+    assert fields.update([a, b], shading=False) == 0 and fields.update([a, b]) == 1   # b's field only
+    assert fields.computed == 2
+
+
+@pytest.mark.gl
+def test_capture_builds_no_vein_field_or_tubes_until_a_draw(gl):
+    """LeafRenderer.capture (export's path) makes only what positions need; a draw afterwards makes
+    the captured leaf's vein field and close-up tubes."""
+    leaf = _veined("ovate", seed=11, tertiary=4.0)
+    gl.capture(leaf, [0.0, 0.5], [0.5, 0.5])
+    fields = gl.leaf_veins.fields
+    assert fields is not None
+    before = fields.computed
+    assert gl.vein_tubes.leaf != leaf                     # no tubes built for the capture
+    gl.capture(leaf, [0.0], [0.25])
+    assert fields.computed == before
+    target = gl.ctx.simple_framebuffer((32, 32))
+    try:
+        target.use()
+        gl.set_camera(frame_view("top", np.array([[-1.0, -1.0, -0.5], [1.0, 1.0, 0.5]]), (32, 32)), srgb=True,
+                      size=(32, 32))
+        gl.draw()
+    finally:
+        gl.ctx.detect_framebuffer(0).use()
+        target.release()
+    assert fields.computed == before + 1 and gl.vein_tubes.leaf == leaf
 
 
 @pytest.mark.gl

@@ -193,7 +193,8 @@ class CanopyRenderer:
         if light.sky:
             self.sky.draw(camera, size)
         if light.ground:
-            self.ground(light.shadows, resolve_shadow_filter(light.shadow_filter, self.gl_renderer)).draw(camera, scene.bounds, size=size, height=self.ground_z)
+            ground = self.ground(light.shadows, resolve_shadow_filter(light.shadow_filter, self.gl_renderer))
+            ground.draw(camera, scene.bounds, size=size, height=self.ground_z)
         # the passes above may have used the units and bindings since: bind everything again
         self.light_uniforms.bind()
         if light.shadows:

@@ -157,6 +157,8 @@ class LeafRenderer:
         self.uploads = 0  # bytes written to GPU buffers/textures by set_leaf (for edit-cost tests)
         self.veins = True  # leaves whose venation is enabled show veins (False: none does)
         self.veins_pending: LeafParams | None = None   # set_leaf(defer_veins=True)'s leaf, veins not rebuilt yet
+        self._tubes_for: LeafParams | None = None   # the leaf whose vein tubes draw() shows (built on first draw)
+        self._unshaded: LeafParams | None = None    # set_leaf(shading=False)'s leaf: its vein field not made yet
         self._vein_layer = -1
         self.lobed = False  # the leaf last given to set_leaf is lobed (drawn on lobed_grid)
         self._draw_defines: dict[str, int] = dict(NO_LOBE_DEFINES)   # draw's variant: no sweep branch unless lobed
@@ -188,16 +190,19 @@ class LeafRenderer:
         return self.resources.prepare
 
     # -- state ----------------------------------------------------------------------------------
-    def set_leaf(self, params: LeafParams, *, textures: bool = True, defer_veins: bool = False) -> None:
+    def set_leaf(self, params: LeafParams, *, textures: bool = True, defer_veins: bool = False,
+                 shading: bool = True) -> None:
         """Upload the leaf's uniform block (under 1 KiB), refresh its derived constants (one
         compute dispatch) and, if its seed changed, its jitter row; with ``textures``, its image
         textures when their files changed (a missing or unreadable one raises ParamError first).
 
         Changing jitter amplitude or density only changes the block: nothing is rebuilt. A shape
-        or venation edit rebuilds the leaf's vein tree, field and grid (15-35 ms on llvmpipe);
+        or venation edit rebuilds the leaf's vein field and grid (15-35 ms on llvmpipe), and its
+        close-up vein tubes at the next :meth:`draw` (:meth:`capture` never builds them);
         with ``defer_veins`` (the viewer, while a slider is dragged) the veins held stay in use,
         a drag behind (they live in (u, v), so they still follow the blade), until
-        :meth:`refresh_veins`.
+        :meth:`refresh_veins`. ``shading=False`` (:meth:`capture`: positions only) leaves the
+        vein shading field out, made by the next :meth:`draw` if one comes.
         """
         layers = (-1, -1)
         if textures and params.texture is not None:
@@ -212,14 +217,15 @@ class LeafRenderer:
         self.lobed = lobe_layer >= 0
         if self.lobed:                             # a swept surface has no veins
             vein_layer = int(self.leaf_veins.update([params], enabled=False)[0])
-            self.vein_tubes.update(None)
+            self._tubes_for = self._unshaded = None
             self.veins_pending = None
         elif defer_veins and self.veins and params.venation.enabled and self._vein_layer >= 0:
             vein_layer = self._vein_layer          # the veins held, until refresh_veins
             self.veins_pending = params
         else:
-            vein_layer = int(self.leaf_veins.update([params], enabled=self.veins)[0])   # rebuilt when the key changed
-            self.vein_tubes.update(params if self.veins else None)                      # rebuilt when the leaf changed
+            vein_layer = int(self.leaf_veins.update([params], enabled=self.veins, shading=shading)[0])
+            self._tubes_for = params if self.veins else None   # tubes rebuilt by draw(), when the leaf changed
+            self._unshaded = None if shading else params
             self.veins_pending = None
         self._vein_layer = vein_layer
         pack_leaf(params, self._leaf, layers=layers, vein_layer=vein_layer, lobe_layer=lobe_layer)
@@ -276,6 +282,9 @@ class LeafRenderer:
         close-up vein tubes are left out of a ``LEAF_WIND`` draw (they would not move with it)."""
         if self.lobed:
             grid = lobed_grid(grid)
+        if self._unshaded is not None:   # the leaf came from capture(): its vein field is made now
+            self.leaf_veins.update([self._unshaded], enabled=self.veins)
+            self._unshaded = None
         self.frame.fit_viewport()   # the veins' level of detail: this draw's image height
         self._bind()
         self.ctx.enable(moderngl.DEPTH_TEST)
@@ -286,7 +295,10 @@ class LeafRenderer:
             program = self.leaf_program({**self._draw_defines, **(defines or {})})
             self.resources.grid(*grid).vao(program).render(moderngl.TRIANGLES)
             if not wireframe and "LEAF_WIND" not in (defines or {}):
-                self.vein_tubes.draw(self.frame)   # veins as geometry where they are wide enough on screen
+                # veins as geometry where they are wide enough on screen; their tree is built here,
+                # not by set_leaf, so that capture() (geometry only) never builds it
+                self.vein_tubes.update(self._tubes_for)
+                self.vein_tubes.draw(self.frame)
         finally:
             self.ctx.wireframe = False
 
@@ -465,7 +477,7 @@ class LeafRenderer:
             return np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32)
         check_buffer(capture_bytes(n), "u, v", f"capturing {n:,} points")
         ensure_alive(self.ctx, "capturing")
-        self.set_leaf(params, textures=False)   # positions only: no image read
+        self.set_leaf(params, textures=False, shading=False)   # positions only: no image, no vein field
         self._bind()
         program = self.program if defines is None else self.leaf_program(defines)
         vbo = self.ctx.buffer(uv.tobytes())

@@ -102,17 +102,19 @@ class VeinDraw:
         """Whether a veined leaf is drawn (the fields are bound)."""
         return self.fields is not None
 
-    def update(self, leaves: Sequence[LeafParams], *, enabled: bool = True) -> NDArray[np.int32]:
+    def update(self, leaves: Sequence[LeafParams], *, enabled: bool = True, shading: bool = True) -> NDArray[np.int32]:
         """Make the textures hold ``leaves``' veins (none when ``enabled`` is false); returns each
         leaf's layer (-1: no veins). Only fields of keys not held yet are computed (a field is
-        kept while a leaf of the update has its key); the style rows are rewritten when they change."""
+        kept while a leaf of the update has its key); the style rows are rewritten when they change.
+        ``shading=False``: the vein grids only (geometry), see :meth:`VeinFields.update
+        <leafview.gpu.vein_field.VeinFields.update>`."""
         if not enabled or not any(p.venation.enabled for p in leaves):
             self.release()
             return np.full(len(leaves), -1, np.int32)
         if self.fields is None:
             self.fields = VeinFields(self.ctx, programs=self.programs)
         drawn = field_leaves(leaves)
-        self.fields.update(drawn)
+        self.fields.update(drawn, shading=shading)
         layers = np.asarray(self.fields.layers, np.int32).reshape(-1)
         rows = style_rows(drawn, layers, self.fields.capacity)
         data = rows.tobytes()

@@ -143,6 +143,7 @@ class VeinFields:
         self.field: moderngl.TextureArray | None = None
         self.grid: moderngl.TextureArray | None = None
         self.keys: list[Hashable | None] = []
+        self._shaded: set[Hashable] = set()   # keys whose shading field is computed (see update)
         self.layers = np.zeros(0, np.int32)
         self.computed = 0     # fields computed so far (tests, benchmarks)
         self.list_capacity = LIST_START
@@ -170,9 +171,11 @@ class VeinFields:
     def capacity(self) -> int:
         return 0 if self.field is None else int(self.field.layers)
 
-    def update(self, leaves: Sequence[LeafParams]) -> int:
+    def update(self, leaves: Sequence[LeafParams], *, shading: bool = True) -> int:
         """Make the arrays hold the keys of ``leaves`` and set :attr:`layers`; returns the number
-        of fields computed (keys not already held)."""
+        of fields computed (keys not already held, and held keys whose field was left out).
+        ``shading=False``: the vein grids only (what the vertex shader reads: geometry capture),
+        the shading fields left for a later update that asks for them."""
         leaves = list(leaves)
         wanted = vein_keys(leaves)
         held = {key: i for i, key in enumerate(self.keys) if key is not None}
@@ -181,7 +184,7 @@ class VeinFields:
         new = [key for key in wanted if key not in held]
         if len(new) > keys.count(None) + self.capacity - len(keys):
             self._allocate(len(wanted))          # a larger array: every field again
-            keys, new = [], list(wanted)
+            keys, new, held = [], list(wanted), {}
         free = [i for i, key in enumerate(keys) if key is None]
         jobs: list[tuple[int, LeafParams]] = []
         first_leaf = {vein_key(p): p for p in reversed(leaves)}
@@ -191,15 +194,20 @@ class VeinFields:
                 keys.append(key)
             keys[layer] = key
             jobs.append((layer, first_leaf[key]))
+        # held keys whose field a geometry-only update left out
+        late = [(held[key], first_leaf[key]) for key in dict.fromkeys(wanted)
+                if shading and key in held and key not in self._shaded]
         try:
-            self._compute(jobs)
+            self._compute(jobs, jobs + late if shading else [])
         except BaseException:   # (a fold refused by vein_grid): the layers written to hold nothing
             spoilt = {layer for layer, _ in jobs}
             self.keys = [None if i in spoilt else key for i, key in enumerate(self.keys)]
+            self._shaded &= {key for key in self.keys if key is not None}
             raise
         self.keys = keys
+        self._shaded = {key for key in keys if key is not None and (key in self._shaded or shading)}
         self.layers = vein_layers(leaves, keys)
-        return len(jobs)
+        return len(jobs) + len(late) if shading else 0
 
     def reserve(self, layers: int) -> None:
         """At least ``layers`` layers in the arrays; a larger array starts empty (every key is
@@ -218,6 +226,7 @@ class VeinFields:
         check_buffer(n * self.size * self.size * _TEXEL_BYTES, "leaves", f"{n} vein field layers of {self.size}²")
         self._textures.release()
         self.field = self.grid = None
+        self._shaded = set()
         field = self._textures.own(self.ctx.texture_array((self.size, self.size, n), 4, dtype="f4"))
         grid = self._textures.own(self.ctx.texture_array((GRID_N, GRID_N, n), 4, dtype="f4"))
         for tex in (field, grid):
@@ -226,16 +235,18 @@ class VeinFields:
         self.field, self.grid = field, grid
         self.keys = []
 
-    def _compute(self, jobs: Sequence[tuple[int, LeafParams]]) -> None:
-        """The field and grid of each (layer, leaf) of ``jobs`` into its layer."""
+    def _compute(self, grids: Sequence[tuple[int, LeafParams]], fields: Sequence[tuple[int, LeafParams]]) -> None:
+        """The grid of each (layer, leaf) of ``grids`` and the field of each of ``fields`` into its
+        layer."""
         assert self.grid is not None
+        for layer, params in grids:
+            grid = np.ascontiguousarray(vein_grid(params, GRID_N, GRID_N), np.float32)
+            self.grid.write(grid.tobytes(), viewport=(0, 0, layer, GRID_N, GRID_N, 1))
         prepared = []
-        for layer, params in jobs:
+        for layer, params in fields:
             seg = vein_segments(params)
             table = halfwidth_table(params)
             prepared.append((layer, table, segment_records(seg.uv0, seg.uv1, seg.order, seg.width, table)))
-            grid = np.ascontiguousarray(vein_grid(params, GRID_N, GRID_N), np.float32)
-            self.grid.write(grid.tobytes(), viewport=(0, 0, layer, GRID_N, GRID_N, 1))
         self.compute(prepared)
 
     def compute(self, jobs: Sequence[tuple[int, NDArray[np.float32], NDArray[np.float32]]]) -> None:
