@@ -1,0 +1,88 @@
+"""Two touching leaves that do not meet at a narrow neck (side by side along an edge, or overlapping
+widely) are refused: where the region parts between two notches into two convex blades
+(:func:`leafview.fit.photo_shape.two_blades`), or where no single leaf's outline follows it
+(:data:`leafview.fit.photo.TOUCHING_FIT_ERROR`). Single leaves, asymmetric ones judged by their
+halves even when halves are off, and lobed leaves are not refused."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from shapely import affinity
+from shapely.geometry import Point, Polygon
+from shapely.ops import unary_union
+
+from leafview.cli import main
+from leafview.errors import ParamError
+from leafview.fit import fit_image
+from leafview.fit.photo import TOUCHING_FIT_ERROR
+from leafview.fit.photo_lobed import lobe_measures
+from leafview.fit.photo_shape import BLADES_SINUS, BLADES_SOLIDITY, two_blades
+from leafview.fit.synthetic_photos import synthetic_photo, write_photo
+
+# seed: (size, what refuses it) of touching pairs the neck test lets through
+TOUCHING = {12: ((500, 550), "misses the outline of the leaf-coloured region"),
+            17: ((600, 600), "misses the outline of the leaf-coloured region"),
+            7: ((550, 600), "into two convex blades")}
+# single leaves: the three worst of 128 measured (a round leaf wider than long whose axis is found
+# across it, 8.0 % of its length off; landmark leaves fitted as halves, 2.3 % and 1.6 %), an
+# asymmetric and a serrated leaf, a two-lobed and an oak leaf
+SINGLES = [(2002, (900, 700), {"kind": "serrated", "petiole": False}), (113, (550, 550), {"kind": "landmark"}), (121, (500, 550), {"kind": "landmark"}),
+           (2, (600, 600), {"kind": "asymmetric", "petiole": False}), (7, (500, 500), {"kind": "serrated"}),
+           (902, (600, 600), {"lobed_preset": "bilobed"}), (901, (600, 600), {"lobed_preset": "oak"})]
+
+
+@pytest.mark.parametrize("seed", sorted(TOUCHING))
+def test_a_touching_pair_without_a_neck_exits_2_and_writes_nothing(seed, tmp_path, capsys) -> None:
+    size, why = TOUCHING[seed]
+    path = write_photo(synthetic_photo(seed, size=size, touching=True), tmp_path / "pair.png")
+    out = tmp_path / "out"
+    assert main(["fit", str(path), "-o", str(out / "leaf.leaf.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and err.startswith("leafview fit: error: ") and str(path) in err, err
+    assert "two touching leaves?" in err and "narrow neck" not in err and why in err, err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(("seed", "size", "options"), SINGLES)
+def test_single_leaves_are_not_refused(seed, size, options) -> None:
+    sp = synthetic_photo(seed, size=size, **options)
+    for halves in (True, False):       # the halves judge even where they are not kept
+        fit = fit_image(sp.image, texture_size=16, halves=halves)
+        if not fit.report["lobed"]:
+            assert min(fit.report["symmetric_error_pct"], fit.report["halves_error_pct"]) < 100 * TOUCHING_FIT_ERROR
+
+
+def test_the_refusals_state_the_measure() -> None:
+    sp = synthetic_photo(17, size=TOUCHING[17][0], touching=True)
+    with pytest.raises(ParamError, match=r"misses the outline .* by \d+\.\d % of its length \(one leaf fits within "
+                                         rf"{100 * TOUCHING_FIT_ERROR:g} %\)") as err:
+        fit_image(sp.image, texture_size=16)
+    assert err.value.path == "image"
+    sp = synthetic_photo(7, size=TOUCHING[7][0], touching=True)
+    with pytest.raises(ParamError, match=r"blades of \d+ % and \d+ % of it \(each fills ≥ \d+ % of its convex hull; "
+                                         rf"one leaf's lobes < {100 * BLADES_SOLIDITY:.0f} %\)"):
+        fit_image(sp.image, texture_size=16)
+
+
+def _ellipse(cx: float, cy: float, a: float, b: float, turn: float = 0.0) -> Polygon:
+    return affinity.rotate(affinity.scale(Point(cx, cy).buffer(1.0, 128), a, b), turn)
+
+
+def _ring(region: Polygon) -> np.ndarray:
+    return np.asarray(region.exterior.coords)[:-1]
+
+
+def test_two_blades_side_by_side_are_a_pair_and_lobes_are_not() -> None:
+    pair = _ellipse(-0.5, 0.0, 0.55, 1.0, 20.0).union(_ellipse(0.5, 0.0, 0.5, 1.0, -15.0))
+    found = two_blades(_ring(pair))
+    assert found is not None and found.solidity > 0.99 and abs(found.shares[0] - 0.52) < 0.02
+    # three lobes round a centre: the cut between two sinuses leaves the base with the other lobes
+    three = unary_union([_ellipse(0.0, 0.5, 0.3, 0.6), _ellipse(-0.45, 0.2, 0.3, 0.6, 50.0),
+                         _ellipse(0.45, 0.2, 0.3, 0.6, -50.0), Point(0.0, 0.0).buffer(0.35)])
+    assert sum(d >= BLADES_SINUS for d in lobe_measures(_ring(three)).sinuses) >= 2
+    assert two_blades(_ring(three)) is None
+    # a notched apex and a cordate base: the cut between them runs most of the leaf's length
+    notched = Point(0.0, 0.0).buffer(0.55, 128).difference(Polygon([(-0.15, 0.6), (0.15, 0.6), (0.0, 0.3)]))
+    notched = notched.difference(Polygon([(-0.1, -0.6), (0.1, -0.6), (0.0, -0.45)]))
+    assert two_blades(_ring(notched)) is None
