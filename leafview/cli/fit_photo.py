@@ -4,6 +4,10 @@ for an image file or a folder.
 
 One photo writes the leaf and its front texture ``NAME.front.png`` (8-bit RGBA, alpha from the
 leaf's mask) beside it, named in the leaf's ``texture`` by its relative path, both or neither.
+``--back BACK.jpg`` (a photo of the same leaf turned over; :func:`leafview.fit.photo_back.back_fit`)
+adds its back texture ``NAME.back.png``, named as the texture's ``back``; a back photo that shows
+another leaf is refused before anything is written. ``--back-base`` / ``--back-apex`` replace the
+landmarks found in the back photo.
 ``-o NAME.leaf.json`` (or ``.json``, ``.toml``) always writes one symmetric leaf, with a warning
 when the sides differ enough for two halves; ``-o NAME.leaves.json`` writes a leaf set holding the
 two one-sided halves of an asymmetric leaf (or the one leaf of a symmetric one).
@@ -50,6 +54,7 @@ from leafview.core.texture import LeafTexture, with_folder
 from leafview.errors import GLUnavailable, UsageError, one_line
 from leafview.export.images import contact_sheet, write_image
 from leafview.fit.photo import DPI_RANGE, ImageFit, fit_image
+from leafview.fit.photo_back import BackFit, back_fit
 from leafview.fit.photo_batch import MAX_JOBS, default_jobs, fit_photos
 from leafview.fit.photo_lobed import LOBED_MODES
 from leafview.fit.photo_texture import MAX_TEXTURE_SIZE, MIN_TEXTURE_SIZE, texture_uint8
@@ -64,7 +69,8 @@ _CELL = 224                 # a contact sheet tile's side for up to _FULL_CELLS 
 _FULL_CELLS = 60
 _CLOUD_OPTIONS = (("scanlines", "--scanlines"), ("iterations", "--iterations"), ("keep_unexplained", "--keep-unexplained"))
 _PHOTO_OPTIONS = (("base", "--base"), ("apex", "--apex"), ("dpi", "--dpi"), ("texture_size", "--texture-size"),
-                  ("jobs", "--jobs"), ("lobed", "--lobed"))
+                  ("jobs", "--jobs"), ("lobed", "--lobed"), ("back", "--back"), ("back_base", "--back-base"),
+                  ("back_apex", "--back-apex"))
 
 
 # -- options -------------------------------------------------------------------------------------------
@@ -107,10 +113,17 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--dpi", type=_dpi, default=None,
                    help="photos: dots per inch, replacing the file's resolution (the leaf's scale becomes metres)")
     p.add_argument("--texture-size", type=_texture_size, default=None, metavar="N",
-                   help="photos: side of the square front texture in texels (default 512)")
+                   help="photos: side of the square front (and back) texture in texels (default 512)")
     p.add_argument("--lobed", choices=LOBED_MODES, default=None,
                    help="photos: fit a lobed leaf (its closed margin): auto (when the outline looks lobed; "
                         "the default), on, or off (always the unilobed model)")
+    p.add_argument("--back", default=None, metavar="PHOTO",
+                   help="one photo: a photo of the same leaf turned over (face down), made into its back texture "
+                        "NAME.back.png")
+    p.add_argument("--back-base", type=_point, default=None, metavar="X,Y",
+                   help="with --back: the blade's base in the back photo's pixels, replacing the one found")
+    p.add_argument("--back-apex", type=_point, default=None, metavar="X,Y",
+                   help="with --back: the blade's apex in the back photo's pixels")
     p.add_argument("--jobs", type=_jobs, default=None, metavar="N",
                    help=f"a folder of photos: worker processes (default: one per core, at most {MAX_JOBS})")
 
@@ -146,17 +159,24 @@ def leaf_name(path: Path) -> str:
 
 
 # -- writing -------------------------------------------------------------------------------------------
-def write_fit(fit: ImageFit, out: Path, *, leaf_set: bool) -> tuple[Path, tuple[LeafParams, ...]]:
+def write_fit(fit: ImageFit, out: Path, *, leaf_set: bool,
+              back: BackFit | None = None) -> tuple[Path, tuple[LeafParams, ...]]:
     """Write the leaf (``leaf_set``: the parts as a leaf set) to ``out`` and its texture
-    ``NAME.front.png`` beside it, both or neither; returns the texture's path and the parts as
-    written (their texture resolving against ``out``'s folder)."""
-    texture_name = f"{safe_component(leaf_name(out), fallback='leaf')}.front.png"
-    texture = LeafTexture(texture_name)
+    ``NAME.front.png`` beside it (with ``back``: and ``NAME.back.png``), all or none; returns the
+    front texture's path and the parts as written (their texture resolving against ``out``'s
+    folder)."""
+    stem = safe_component(leaf_name(out), fallback="leaf")
+    texture_name = f"{stem}.front.png"
+    back_name = f"{stem}.back.png" if back is not None else ""
+    texture = LeafTexture(texture_name, back_name)
     parts = tuple(p.replace(texture=texture) for p in fit.parts)
     target = out.parent / texture_name
     with outputs():
         write_image(target, texture_uint8(fit.texture),
                     description=f"leafview front texture of {parts[0].name}, fitted to {Path(fit.photo.path).name}")
+        if back is not None:
+            write_image(out.parent / back_name, texture_uint8(back.texture),
+                        description=f"leafview back texture of {parts[0].name}, from {Path(back.photo.path).name}")
         if leaf_set:
             save_leaves(list(parts), out)
         else:
@@ -192,17 +212,28 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix.lower() not in (".json", ".toml"):
         raise UsageError(f"-o {args.output}: a leaf fitted to a photo is written as NAME.leaf.json (or .json, .toml), "
                          "or NAME.leaves.json for both halves of an asymmetric leaf")
+    back_photo = getattr(args, "back", None)
+    for attr, flag in (("back_base", "--back-base"), ("back_apex", "--back-apex")):
+        if getattr(args, attr, None) is not None and back_photo is None:
+            raise UsageError(f"{flag} applies with --back BACK_PHOTO, a photo of the leaf turned over")
+    if back_photo is not None and not Path(back_photo).is_file():
+        raise UsageError(f"--back {back_photo}: no such photo file")
     fit = fit_image(src, base=args.base, apex=args.apex, name=leaf_name(out), halves=leaf_set, **_options(args))
+    back = (back_fit(fit, back_photo, base=args.back_base, apex=args.back_apex) if back_photo is not None
+            else None)
     _warn(src, fit, leaf_set, out)
-    texture, _ = write_fit(fit, out, leaf_set=leaf_set)
+    texture, _ = write_fit(fit, out, leaf_set=leaf_set, back=back)
     r = fit.report
     scale = f"{r['scale']:.4g} m ({r['dpi']:g} dpi)" if r["dpi"] else "1 (no resolution)"
     model = (f"a lobed margin of {r['controls']} control points" if r["lobed"] else
              f"{'/'.join(str(n) for n in r['rows'])} silhouette rows")
-    report(args, f"wrote {out} and {texture.name}: IoU {r['iou']:.3f} with the traced leaf, Hausdorff "
+    textures = (f"{texture.name} and {texture.name.removesuffix('.front.png')}.back.png" if back is not None
+                else texture.name)
+    back_note = f"back photo IoU {back.iou:.3f} with the turned-over fit, " if back is not None else ""
+    report(args, f"wrote {out} and {textures}: IoU {r['iou']:.3f} with the traced leaf, Hausdorff "
                  f"{r['hausdorff_pct']:.2f} % of the length, {model}"
                  f"{', two halves' if fit.asymmetric else ''}, petiole {r['petiole_length']:.3f}, scale {scale}, "
-                 f"in {r['seconds']:.2f} s")
+                 f"{back_note}in {r['seconds']:.2f} s")
     return EXIT_OK
 
 
@@ -229,8 +260,9 @@ def _renderer(quiet: bool) -> LeafRenderer | None:
 
 
 def _run_folder(args: argparse.Namespace, src: Path) -> int:
-    for attr, flag in (("base", "--base"), ("apex", "--apex")):
-        if getattr(args, attr) is not None:
+    for attr, flag in (("base", "--base"), ("apex", "--apex"), ("back", "--back"), ("back_base", "--back-base"),
+                       ("back_apex", "--back-apex")):
+        if getattr(args, attr, None) is not None:
             raise UsageError(f"{flag} applies to one photo, not to the folder {src}")
     out = output_directory(Path(args.output))
     photos = sorted(p for p in src.iterdir() if p.suffix.lower() in PHOTO_SUFFIXES and p.is_file())
