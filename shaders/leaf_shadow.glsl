@@ -46,11 +46,11 @@ float shadow_lookup(int k, vec3 s, float texel) {
     // atlas texel coordinates (texel centres at integers), the 4 x 4 footprint kept inside the tile
     vec2 origin = vec2(float(k % 2), float(k / 2)) * tile;
     vec2 t = clamp(origin + s.xy * tile - 0.5, origin + 1.0, origin + (tile - 2.0));
-    vec2 c = floor(t), f = t - c, g = 1.0 - f;
     vec2 inv = 1.0 / vec2(textureSize(sun_shadow, 0));
 #ifdef SHADOW_FAST
-    return texture(sun_shadow, vec3((t + 0.5) * inv, ref));
-#endif
+    return texture(sun_shadow, vec3((t + 0.5) * inv, ref));   // one bilinear tap: texels floor(t)..+1
+#else
+    vec2 c = floor(t), f = t - c, g = 1.0 - f;
     // four depth-compare gathers (texels c-1..c and c+1..c+2 per axis; components (0,1) (1,1) (1,0)
     // (0,0)) weighted by the nine bilinear taps' sums: g, 1, 1, f per axis
     vec4 a = textureGather(sun_shadow, c * inv, ref);
@@ -60,6 +60,7 @@ float shadow_lookup(int k, vec3 s, float texel) {
     float total = dot(a, vec4(g.x, 1.0, g.y, g.x * g.y)) + dot(b, vec4(1.0, f.x, f.x * g.y, g.y))
                 + dot(d, vec4(g.x * f.y, f.y, 1.0, g.x)) + dot(e, vec4(f.y, f.x * f.y, f.x, 1.0));
     return total / 9.0;
+#endif
 }
 
 float sun_visibility(vec3 world, vec3 world_normal, float view_depth) {

@@ -158,6 +158,7 @@ class LeafRenderer:
         self.veins = True  # leaves whose venation is enabled show veins (False: none does)
         self.veins_pending: LeafParams | None = None   # set_leaf(defer_veins=True)'s leaf, veins not rebuilt yet
         self._tubes_for: LeafParams | None = None   # the leaf whose vein tubes draw() shows (built on first draw)
+        self._tubes_stale = False                   # _tubes_for changed since draw() last followed it
         self._unshaded: LeafParams | None = None    # set_leaf(shading=False)'s leaf: its vein field not made yet
         self._vein_layer = -1
         self.lobed = False  # the leaf last given to set_leaf is lobed (drawn on lobed_grid)
@@ -218,6 +219,7 @@ class LeafRenderer:
         if self.lobed:                             # a swept surface has no veins
             vein_layer = int(self.leaf_veins.update([params], enabled=False)[0])
             self._tubes_for = self._unshaded = None
+            self._tubes_stale = True
             self.veins_pending = None
         elif defer_veins and self.veins and params.venation.enabled and self._vein_layer >= 0:
             vein_layer = self._vein_layer          # the veins held, until refresh_veins
@@ -225,6 +227,7 @@ class LeafRenderer:
         else:
             vein_layer = int(self.leaf_veins.update([params], enabled=self.veins, shading=shading)[0])
             self._tubes_for = params if self.veins else None   # tubes rebuilt by draw(), when the leaf changed
+            self._tubes_stale = True
             self._unshaded = None if shading else params
             self.veins_pending = None
         self._vein_layer = vein_layer
@@ -297,7 +300,9 @@ class LeafRenderer:
             if not wireframe and "LEAF_WIND" not in (defines or {}):
                 # veins as geometry where they are wide enough on screen; their tree is built here,
                 # not by set_leaf, so that capture() (geometry only) never builds it
-                self.vein_tubes.update(self._tubes_for)
+                if self._tubes_stale:
+                    self.vein_tubes.update(self._tubes_for)
+                    self._tubes_stale = False
                 self.vein_tubes.draw(self.frame)
         finally:
             self.ctx.wireframe = False
