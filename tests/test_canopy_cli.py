@@ -137,3 +137,11 @@ def test_the_settings_tables_of_docs_canopy_match_the_code():
     result = subprocess.run([sys.executable, "tools/canopy_settings_table.py", "--check"], cwd=root,
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_a_negative_azimuth_is_a_value_not_an_option(tmp_path):
+    """``--sun -180,90``: a comma list starting with '-' is the option's value (argparse alone
+    would take it for an unknown option)."""
+    out = tmp_path / "s.toml"
+    assert main(["scene", "--leaves", "3", "--sun", "-180,90", "--save", str(out), "-q"]) == 0
+    assert "-180" in out.read_text()

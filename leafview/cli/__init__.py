@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 from collections.abc import Sequence
 
@@ -82,9 +83,24 @@ def _chosen(argv: Sequence[str]) -> str | None:
     return next((a for a in argv if not a.startswith("-")), None)
 
 
+_NEGATIVE_LIST = re.compile(r"-[0-9.][0-9.eE+-]*(,[-+]?[0-9.][0-9.eE+-]*)+")
+
+
+def _attach_negative_lists(argv: list[str]) -> list[str]:
+    """``--opt -180,90`` as ``--opt=-180,90``: argparse takes a value that starts with '-' for an
+    option unless it reads as one negative number, which a comma-separated list does not."""
+    out: list[str] = []
+    for arg in argv:
+        if out and out[-1].startswith("--") and "=" not in out[-1] and _NEGATIVE_LIST.fullmatch(arg):
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+    return out
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``leafview`` with ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    argv = _attach_negative_lists(list(sys.argv[1:] if argv is None else argv))
     command = _chosen(argv)
     args = build_parser(command if command in COMMANDS else None).parse_args(argv)
     try:
