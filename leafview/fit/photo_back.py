@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from shapely.geometry import Polygon
 
 from leafview.botany.lobe_sweep import sweep_table
 from leafview.errors import ParamError
@@ -94,16 +95,14 @@ def _registered(fit: ImageFit, traced: LeafOutline) -> tuple[float, F64, LeafOut
     :data:`_TURN_STEP` degrees, then to a tenth of that); the landmarks are where base and apex
     land. For a back photo whose base or apex was found in the wrong place."""
     ring = margin_pixels(fit.parts, np.eye(3))                     # the fitted outline in leaf space
-    x, y = ring[:, 0], ring[:, 1]
-    cross = x * np.roll(y, -1) - np.roll(x, -1) * y
-    area = 0.5 * float(cross.sum())
-    if not abs(area) > 0.0 or not traced.blade.any():
+    outline = Polygon(ring)
+    area = float(outline.area)
+    if not area > 0.0 or not traced.blade.any():
         return 0.0, np.eye(3), traced
-    centre = np.array([float(((x + np.roll(x, -1)) * cross).sum()), float(((y + np.roll(y, -1)) * cross).sum())])
-    centre /= 6.0 * area
+    centre = np.array(outline.centroid.coords[0], np.float64)
     rows, cols = np.nonzero(traced.blade)
     target = np.array([cols.mean(), rows.mean()])
-    scale = math.sqrt(len(rows) / abs(area))
+    scale = math.sqrt(len(rows) / area)
 
     def score(angle: float) -> tuple[float, F64]:
         m = _similarity(scale, angle, centre, target)

@@ -193,7 +193,7 @@ class CanopyRenderer:
         if light.sky:
             self.sky.draw(camera, size)
         if light.ground:
-            ground = self.ground(light.shadows, resolve_shadow_filter(light.shadow_filter, self.gl_renderer))
+            ground = self.ground(light.shadows, light.shadow_filter)
             ground.draw(camera, scene.bounds, size=size, height=self.ground_z)
         # the passes above may have used the units and bindings since: bind everything again
         self.light_uniforms.bind()
@@ -205,9 +205,11 @@ class CanopyRenderer:
         self.wind_uniforms.bind(scene)
         scene.draw(settings, defines=canopy_defines(light, self.wind, self.gl_renderer))
 
-    def ground(self, shadows: bool, shadow_filter: str = "soft") -> GroundPass:
+    def ground(self, shadows: bool, shadow_filter: str = "auto") -> GroundPass:
         """The ground pass with or without the sun's shadow maps, read with ``shadow_filter``
-        (made on first use, with the scene's contact points)."""
+        (``"auto"`` resolved for this context, as the leaves' by :func:`canopy_defines`; made on
+        first use, with the scene's contact points)."""
+        shadow_filter = resolve_shadow_filter(shadow_filter, self.gl_renderer)
         key = (bool(shadows), shadow_filter if shadows else "")
         found = self._grounds.get(key)
         if found is None:
