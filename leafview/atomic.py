@@ -204,13 +204,15 @@ def _probe(folder: Path, shown: Path, flag: str | None) -> None:
     if key in _probed:
         return
     name = folder / f".leafview-probe.lv{os.getpid()}-{_token()}.part"
-    try:
-        fd = os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o600)
-    except OSError as exc:
-        raise output_error(exc, shown, flag) from None
-    os.close(fd)
-    with contextlib.suppress(OSError):
-        os.unlink(name)
+    # A SIGTERM between the create and the unlink would leave the probe behind: the pair runs as
+    # one critical step, and a signal arriving inside it is raised once the probe is gone.
+    with signal_guard(), _critical():
+        try:
+            fd = os.open(name, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_CLOEXEC", 0), 0o600)
+        except OSError as exc:
+            raise output_error(exc, shown, flag) from None
+        os.close(fd)
+        _unlink(name)
     _probed.add(key)
 
 

@@ -335,6 +335,25 @@ def test_stale_temp_files_are_swept_but_live_ones_kept(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([alive.name, fresh.name, user.name])
 
 
+def test_sigterm_during_the_writability_probe_leaves_no_probe_file(tmp_path, monkeypatch):
+    """The hostile rerun sends SIGTERM the moment it sees a temporary name, which can be the
+    writability probe: the signal waits until the probe is removed, then ends the run."""
+    import leafview.atomic as atomic_mod
+    monkeypatch.setattr(atomic_mod, "_probed", set())
+    real_close = os.close
+
+    def close_and_signal(fd):
+        real_close(fd)
+        os.kill(os.getpid(), signal.SIGTERM)     # arrives between the probe's create and unlink
+
+    monkeypatch.setattr(atomic_mod.os, "close", close_and_signal)
+    with pytest.raises(atomic_mod.Terminated):
+        check_target(tmp_path / "leaf.glb")
+    monkeypatch.setattr(atomic_mod.os, "close", real_close)
+    assert list(tmp_path.iterdir()) == []
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+
+
 # -- real small and read-only file systems ---------------------------------------------------------
 def test_real_full_tmpfs_export_and_save(small_fs, capsys):
     (small_fs / "keep.glb").write_bytes(b"old")
