@@ -508,9 +508,10 @@ class Outputs:
         """A temporary file for ``target`` to write into; it is verified (non-empty, on disk) and
         renamed onto ``target`` when the transaction commits."""
         t = check_target(target)
-        tmp = self._new_temp(t)
-        self._open.append(tmp)
-        self._stage(t, tmp)
+        with _critical():                # created and registered as one step, so a rollback finds it
+            tmp = self._new_temp(t)
+            self._open.append(tmp)
+            self._stage(t, tmp)
         return tmp
 
     def staged(self, target: str | os.PathLike[str]) -> Path | None:
@@ -649,12 +650,16 @@ def atomic_output(path: str | os.PathLike[str], *, expected_size: int | None = N
     target = check_target(path)
     tx = _ACTIVE.get()
     with signal_guard():
-        folders = [] if tx is not None else _make_folders(target.parent)
-        if tx is not None:
-            tmp = tx._new_temp(target)
-        else:
-            tmp = _create_temp(target)
+        folders: list[Path] = []
+        tmp: Path | None = None
         try:
+            with _critical():            # a signal here waits until the temp file is known
+                if tx is not None:
+                    tmp = tx._new_temp(target)
+                else:
+                    folders = _make_folders(target.parent)
+                    tmp = _create_temp(target)
+            assert tmp is not None
             yield tmp
             _finish(tmp, target, expected_size)
             if verify is not None:
@@ -668,7 +673,8 @@ def atomic_output(path: str | os.PathLike[str], *, expected_size: int | None = N
                 _fsync_folder(target.parent)
         except BaseException as exc:
             with _critical():
-                _unlink(tmp)
+                if tmp is not None:
+                    _unlink(tmp)
                 _remove_folders(folders)
             if isinstance(exc, OSError) and not isinstance(exc, LeafviewError):
                 raise output_error(exc, target) from exc
