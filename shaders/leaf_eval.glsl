@@ -5,7 +5,8 @@
 // (leafview.gpu.layout.feature_defines), and LEAF_NO_VEINS the vein-shape grid when no leaf has a
 // vein layer (leafview.gpu.layout.vein_defines), and LEAF_NO_LOBES the swept surface of lobed
 // leaves (lobe_eval) when no leaf of a draw is lobed (leafview.gpu.layout.lobe_defines); the results
-// are identical for the leaves they are used with.
+// are the same for the leaves they are used with, to float rounding (the compiler may contract
+// a multiply-add differently when more code shares the function: up to about 1e-7 apart).
 // The including shader defines LEAF as the record every vertex reads (the Leaf uniform block, a
 // LeafData row, or the LeafVertex made of instanced vertex attributes: only the LeafVertex members
 // and the branch code are read through it). The members of the optional branches (ripples,
@@ -218,6 +219,46 @@ void ext_silhouette(int rows, float v, out vec3 Pv, out vec3 Qv, out vec3 dPv, o
     }
 }
 
+// Landmark margin (leafview/core/margin.py; Garg & Leow 2011, eqs 2-6), leaf_rows = LEAF_MARGIN_ROWS:
+// side sigma's quadratic B-spline (x, y)(v), written in the side's own frame, is placed on the
+// midrib at the height y: P = A(y), Q = x n(y) (n the in-plane normal of eq. 2), and their
+// v-derivatives. A side is MARGIN_SIDE_TEXELS texels of ROW_margin: the inner knots (w: the gaps),
+// then per gap (p_g, a_g) and (b_g, p_{g+1}); the gap's two spans meet at m = (a_g + b_g) / 2.
+// numpy reference: leafview/core/margin.py, side_points and margin_frame.
+void margin_silhouette(float sigma, float v, vec3 a1, vec3 a2, out vec3 Pv, out vec3 Qv, out vec3 dPv,
+                       out vec3 dQv) {
+    int base = sigma > 0.0 ? 0 : MARGIN_SIDE_TEXELS;
+    vec4 kt = ROW_margin(base);
+    int gaps = int(kt.w);
+    int g = min(int(v >= kt.x) + int(v >= kt.y) + int(v >= kt.z), gaps - 1);
+    float lo = g == 0 ? 0.0 : kt[max(g - 1, 0)];
+    float hi = g == gaps - 1 ? 1.0 : kt[min(g, 3)];
+    vec4 t0 = ROW_margin(base + 1 + 2 * g);  // p_g, a_g
+    vec4 t1 = ROW_margin(base + 2 + 2 * g);  // b_g, p_{g+1}
+    float h = hi - lo;
+    float f = (v - lo) / h;
+    vec2 m = 0.5 * (t0.zw + t1.xy);
+    bool first = f < 0.5;
+    float t = first ? 2.0 * f : 2.0 * f - 1.0;
+    vec2 c0 = first ? t0.xy : m;
+    vec2 c1 = first ? t0.zw : t1.xy;
+    vec2 c2 = first ? m : t1.zw;
+    float r = 1.0 - t;
+    vec2 p = r * r * c0 + 2.0 * r * t * c1 + t * t * c2;
+    vec2 dp = (4.0 / h) * (r * (c1 - c0) + t * (c2 - c1));
+    vec3 dA = cubic_dt(LEAF_BASE, a1, a2, LEAF_APEX, p.y);
+    vec3 ddA = cubic_dt2(LEAF_BASE, a1, a2, LEAF_APEX, p.y);
+    vec3 mm = vec3(-dA.y, dA.x, 0.0);
+    vec3 dm = vec3(-ddA.y, ddA.x, 0.0);
+    float ml = length(mm);
+    vec3 n = mm / ml;
+    vec3 dn = (dm - n * dot(n, dm)) / ml;
+    Pv = cubic(LEAF_BASE, a1, a2, LEAF_APEX, p.y);
+    Qv = p.x * n;
+    dPv = dA * dp.y;
+    dQv = dp.x * n + (p.x * dp.y) * dn;
+}
+
 // Evaluation strategy (exactly eqs 3-6, rearranged; the numpy reference in leafview/deform/surface.py
 // implements the equations literally and the readback test compares the two):
 // S, F and G for side sigma share the axis points A(v̄_i) and differ only in the fraction of
@@ -246,7 +287,8 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
 #ifdef LEAF_NO_EXTENDED
     const int rows = 0;           // no leaf of this draw is extended: the branches below fold away
 #else
-    int rows = leaf_branch_rows(LEAF);  // 0: the paper's quartic; N: an extended silhouette of N rows
+    int rows = leaf_branch_rows(LEAF);  // 0: the paper's quartic; LEAF_MARGIN_ROWS: a landmark
+                                         // margin; N > 1: an extended silhouette of N rows
 #endif
     if (rows == 0) {
         // quartic weights at v for the inner points (the base is the origin, so it drops out) and
@@ -267,7 +309,15 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
     }
 #ifndef LEAF_NO_EXTENDED
     else {
-        ext_silhouette(rows, v, Pv, Qv, dPv, dQv, z, dz, Tv, dTv);
+        // a landmark margin takes the heights of the paper's three rows (degree 4) from here, and
+        // replaces P, Q and the tilts
+        bool margin = rows == LEAF_MARGIN_ROWS;
+        ext_silhouette(margin ? 3 : rows, v, Pv, Qv, dPv, dQv, z, dz, Tv, dTv);
+        if (margin) {
+            margin_silhouette(sigma, v, a1, a2, Pv, Qv, dPv, dQv);
+            Tv = vec2(0.0);
+            dTv = vec2(0.0);
+        }
     }
 #endif
 
@@ -283,7 +333,7 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
     e.Lv = b.x * dAv + (1.0 - b.x) * dPv + u * dQv + vec3(0.0, 0.0, dot(b.yzw, dz));
     e.Luv = sigma * db.x * (dAv - dPv) + dQv + vec3(0.0, 0.0, sigma * dot(db.yzw, dz));
 #ifndef LEAF_NO_EXTENDED
-    if (rows > 0) {  // tilted rows: + |u| T(v), T the side-independent tilt offsets
+    if (rows > 0) {  // tilted rows: + |u| T(v), T the side-independent tilt offsets (0 for a margin)
         e.L.xy += s * Tv;
         e.Lu.xy += sigma * Tv;
         e.Lv.xy += s * dTv;

@@ -25,7 +25,8 @@ void main() {
     set_leaf_branches(leaves[i], (leaf_ripple_on(leaves[i]) ? LEAF_BRANCH_RIPPLE : 0)
                                  + (leaf_bend_on(leaves[i]) ? LEAF_BRANCH_BEND : 0) + LEAF_BRANCH_ROWS * rows
                                  + LEAF_BRANCH_LOBE * (leaf_lobe_layer(leaves[i]) + 1));
-    if (rows == 0) {  // the paper's quartic
+    if (rows <= LEAF_MARGIN_ROWS) {  // the paper's quartic (a landmark margin: its heights; the
+                                     // margin's texels in the extended members stay as packed)
         for (int k = 0; k < 3; ++k) {
             float vb = leaves[i].vbar[k];
             vec3 p = cubic(LEAF_BASE, a1, a2, LEAF_APEX, vb);

@@ -36,8 +36,12 @@ def test_shapes_bench_quick_run_fills_the_table(gl):
     table = format_table(res)
     assert res["gl_renderer"] == gl.ctx.info["GL_RENDERER"] and "vs the paper's ~550 /s" in table
     assert "landmark leaves end to end" in table and "full batch fit" in table
-    parts = sum(res[f"landmark_{k}_ms"] for k in ("generate", "fit", "pack", "draw"))
+    parts = sum(res[f"landmark_{k}_ms"] for k in ("generate", "ready", "draw"))
     assert abs(1e3 / parts - res["landmark_leaves_per_s"]) <= 1e-9 * res["landmark_leaves_per_s"]
+    fit = sum(res[k] for k in ("landmark_fit_generate_ms", "landmark_fit_ms", "landmark_fit_pack_ms",
+                               "landmark_fit_draw_ms"))
+    assert abs(1e3 / fit - res["landmark_fit_leaves_per_s"]) <= 1e-9 * res["landmark_fit_leaves_per_s"]
+    assert res["landmark_fit_generate_ms"] > res["landmark_generate_ms"] and "margin drawn" in table
     assert 0.0 <= res["landmark_fit_within_target"] <= 1.0 and res["landmark_fit_error_max"] > 0.0
     assert 0.0 <= res["landmark_refit_share"] <= 1.0 and "refitted" in table
     json.dumps(res)

@@ -203,7 +203,8 @@ def test_parameter_bytes_exclude_exactly_the_derived_members():
 
 def test_shader_permutations_match_the_full_program(gl, presets):
     """For every preset, the variant compiled for its features (see feature_defines) captures
-    exactly the full program's vertices and normals."""
+    the full program's vertices and normals, to float rounding: the same equations, but the
+    compiler may contract a multiply-add differently in the larger program (up to 7.5e-8 seen)."""
     from leafview.gpu.layout import feature_defines, pack_leaf
     from leafview.shapes import shapes_params
 
@@ -222,4 +223,4 @@ def test_shader_permutations_match_the_full_program(gl, presets):
     for name, leaf in leaves.items():
         outs = [np.concatenate(gl.capture(leaf, uv[:, 0], uv[:, 1], defines=defines), axis=1)
                 for defines in (None, feature_defines(pack_leaf(leaf)))]  # None: the full program
-        np.testing.assert_array_equal(outs[0], outs[1], err_msg=name)
+        np.testing.assert_allclose(outs[0], outs[1], rtol=0, atol=2e-7, err_msg=name)

@@ -11,6 +11,8 @@ import re
 import numpy as np
 import pytest
 
+from leafview.botany.catalogue import landmark_leaf, random_instance
+from leafview.botany.landmarks import margin_params
 from leafview.core.params import Bending, Jitter, Transform
 from leafview.deform.surface import drawn_uv, grid_uv, tessellate
 from leafview.gpu.instanced import InstancedLeaves, OffscreenTarget
@@ -19,6 +21,7 @@ from leafview.gpu.layout import (
     LEAF_ATTRIBUTES,
     LEAF_BLOCK,
     LEAF_VERTEX_BLOCK,
+    MARGIN_ROWS,
     MAX_VERTEX_ATTRIBUTES,
     ROW_TEXELS,
     ROWS_PER_LINE,
@@ -45,6 +48,8 @@ def _mixed(presets) -> dict:
     ovate = presets["ovate"]
     extended = shapes_params("elliptic-concave-extended", polish=False)
     rip = presets["maize"].ripple
+    cordate = random_instance(landmark_leaf("cordate"), seed=5, amount=0.2)
+    margin = margin_params([cordate], ovate.replace(shape=dataclasses.replace(ovate.shape, half=0)))[0]
     return {
         "plain": ovate,
         "jittered": presets["serrate"].replace(jitter=Jitter(enabled=True, seed=4, amplitude=0.05, density=20.0)),
@@ -54,6 +59,8 @@ def _mixed(presets) -> dict:
         "extended": extended,
         "one-sided": ovate.replace(shape=dataclasses.replace(ovate.shape, half=-1)),
         "extended, jittered": extended.replace(jitter=Jitter(enabled=True, seed=9, amplitude=0.03, density=14.0)),
+        "landmark margin": margin,
+        "landmark margin, rippled and bent": margin.replace(ripple=presets["maize"].ripple, bending=Bending(load=4, twist=-20)),
     }
 
 
@@ -109,7 +116,7 @@ def test_prepare_pass_writes_the_branch_code(gl, presets):
     leaves = list(_mixed(presets).values())
     records, _ = pack_leaves(leaves)
     code = branch_code(records)
-    rows = [p.shape.rows if p.shape.extended else 0 for p in leaves]
+    rows = [MARGIN_ROWS if p.margin is not None else p.shape.rows if p.shape.extended else 0 for p in leaves]
     assert code.tolist() == [int(p.ripple.enabled) + 2 * int(p.bending.active) + 4 * n for p, n in zip(leaves, rows)]
     assert {0, 1, 2, 3} < set(code.tolist()) and max(rows) > 3
     out = run_prepare(gl, records)
@@ -149,7 +156,7 @@ def test_one_instanced_draw_of_every_kind_matches_numpy(gl, presets):
 @pytest.fixture(scope="module")
 def mixed_scene(presets):
     species = tuple(_mixed(presets).values())
-    return build_scene(SceneSpec(species=species, leaves=160, seed=3, plants=24))  # every species appears
+    return build_scene(SceneSpec(species=species, leaves=200, seed=3, plants=30))  # every species appears
 
 
 @pytest.mark.gl
@@ -160,7 +167,7 @@ def test_scene_draw_reads_every_kind_as_numpy(gl, mixed_scene):
     kinds = len(scene.species)
     picks = [int(i) for k in range(kinds) for i in np.flatnonzero(scene.species_id == k)[-2:]]
     assert len(picks) == 2 * kinds
-    with SceneRenderer(gl.ctx, scene, max_block_bytes=60 * LEAF_BLOCK.nbytes, resources=gl.resources) as r:
+    with SceneRenderer(gl.ctx, scene, max_block_bytes=80 * LEAF_BLOCK.nbytes, resources=gl.resources) as r:
         assert len(r.batches) == 3
         for level in (0, 2):
             got = r.capture(picks, level)

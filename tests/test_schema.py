@@ -130,8 +130,9 @@ def test_schema_follows_the_field_specs():
     schema = leaf_schema()
     specs = field_specs()
     listed = {f"{g}.{k}" for g, s in schema["properties"].items() if "properties" in s for k in s["properties"]}
-    # the texture table holds file paths, not numbers with ranges: it has no field specs
-    assert listed == set(specs) | {"texture.front", "texture.back"}
+    # the texture table holds file paths and the margin table curve points, not numbers with
+    # ranges the panels edit: they have no field specs
+    assert listed == set(specs) | {"texture.front", "texture.back", "margin.right", "margin.left"}
     amp = schema["properties"]["jitter"]["properties"]["amplitude"]
     assert (amp["minimum"], amp["maximum"]) == specs["jitter.amplitude"].hard_range
     assert amp["title"] == specs["jitter.amplitude"].label

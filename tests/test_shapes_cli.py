@@ -3,10 +3,13 @@ and bad input (exit 2, the field named, no file written)."""
 
 import json
 
+import numpy as np
 import pytest
 
-from leafview.botany.catalogue import catalogue
+from leafview.botany.catalogue import catalogue, landmark_leaf, random_instance
+from leafview.botany.landmarks import margins
 from leafview.cli import main
+from leafview.core.defaults import DETAIL_GRID
 from leafview.core.params import LeafParams
 from leafview.export.images import PARAMS_ATTRIBUTE, read_image
 from leafview.shapes import shapes_params
@@ -52,6 +55,21 @@ def test_directory_of_random_instances(gl, tmp_path):
 
 
 @pytest.mark.gl
+def test_margin_instance_embeds_its_exact_margin(gl, tmp_path):
+    """--margin: the random instance is drawn from its own landmark margin, and the image's
+    embedded parameters carry that margin (re-rendering them gives the same leaf)."""
+    out = tmp_path / "c.png"
+    assert main(["shapes", "--names", "cordate", "--seed", "3", "--margin", "-o", str(out), "--size", "48",
+                 "-q"]) == 0
+    img, meta = read_image(out)
+    leaf = LeafParams.from_dict(json.loads(meta[PARAMS_ATTRIBUTE]))
+    assert leaf.name == "cordate#3" and leaf.margin is not None
+    assert leaf.margin == margins([random_instance(landmark_leaf("cordate"), 3)])[0]
+    again = gl.render_many([leaf], (48, 48), "top", grid=DETAIL_GRID)[0]
+    assert np.abs(img.astype(int) - again).max() <= 1
+
+
+@pytest.mark.gl
 def test_lobed_leaf_renders(gl, tmp_path, capsys):
     out = tmp_path / "maple.png"
     assert main(["shapes", "--lobed", "maple", "-o", str(out), "--size", "64"]) == 0
@@ -69,7 +87,9 @@ def test_lobed_leaf_renders(gl, tmp_path, capsys):
     (["shapes", "--sheet", "-o", "sheet.exr"], "use .png or .tif"),
     (["shapes", "--lobed", "mapel", "-o", "x.png"], "built-in"),
     (["shapes", "--lobed", "maple", "-o", "x.txt"], "give an image file name"),
-    (["shapes", "--lobed", "maple", "--sheet", "-o", "x.png"], "drop --names, --sheet and --seed"),
+    (["shapes", "--lobed", "maple", "--sheet", "-o", "x.png"], "drop --names, --sheet, --seed and --margin"),
+    (["shapes", "--lobed", "maple", "--margin", "-o", "x.png"], "drop --names, --sheet, --seed and --margin"),
+    (["shapes", "--margin"], "--margin render images: give -o FILE or -o DIR"),
 ])
 def test_bad_input_exits_2_and_writes_nothing(tmp_path, monkeypatch, capsys, argv, message):
     monkeypatch.chdir(tmp_path)

@@ -15,22 +15,28 @@ is asserted:
 * ``generated_per_s``: landmark → fast fit → drawn, end to end per leaf, and ``vs_paper_550``
   (``generated_polished_per_s`` the same with the polished fit);
 * ``extended_vs_quartic_frame``: frame time of leaves on the extended silhouette path ÷ the same
-  count of the paper's quartic leaves (the cost of the extension);
+  count of the paper's quartic leaves (the cost of the extension); ``margin_vs_quartic_frame`` the
+  same for leaves drawn with their landmark margin (:mod:`leafview.core.margin`);
 * bytes of the leaf record;
 * ``landmark_leaves_per_s`` (issue 20): random instances of all 62 catalogue shapes end to end,
-  per leaf: generated (:func:`~leafview.botany.catalogue.random_instance` and the margins,
-  :func:`~leafview.botany.landmarks.outlines`), made shader-ready (Ω fitted to within 1 % by
-  :func:`~leafview.botany.shapes.fit_instances`: the quick batch fit, then the full batch fit for
-  the few leaves it misses; placed and packed into leaf records) and
-  drawn (upload and one instanced draw of the whole batch, as ``render_per_s``), with its parts
-  (``landmark_generate_ms``, ``landmark_fit_ms``, ``landmark_pack_ms``, ``landmark_draw_ms``),
-  the draw alone (``landmark_draw_only_per_s``), this process's CPU time per leaf
+  per leaf: generated (:func:`~leafview.botany.catalogue.random_instance`), made shader-ready
+  (their landmark margins in closed form as the leaves' silhouettes,
+  :func:`~leafview.botany.landmarks.margin_params`: nothing fitted; placed and packed into leaf
+  records) and drawn (upload and one instanced draw of the whole batch, as ``render_per_s``),
+  with its parts (``landmark_generate_ms``, ``landmark_ready_ms``, ``landmark_draw_ms``), the
+  draw alone (``landmark_draw_only_per_s``) and this process's CPU time per leaf
   (``landmark_cpu_ms``, all threads: other jobs on a shared machine move it less than the wall
-  time) and the outline error of the fits as :func:`~leafview.botany.batch_fit.outline_errors`
-  measures it (median / p95 / max, share within 1 % without a fold, rows;
-  ``landmark_quick_within_target``: the share of that fit's quick pass within the target alone,
-  ``landmark_refit_share``: the share it refitted); ``landmark_full_*``: a subset of the same leaves through the full
-  batch fit (:func:`~leafview.botany.batch_fit.fit_outlines`, with its per-leaf fallback).
+  time);
+* ``landmark_fit_leaves_per_s``: the same instances, interleaved, through the Ω fit instead:
+  margins sampled (:func:`~leafview.botany.landmarks.outlines`), Ω fitted to within 1 % by
+  :func:`~leafview.botany.shapes.fit_instances` (the quick batch fit, then the full batch fit for
+  the few leaves it misses), packed and drawn (``landmark_fit_generate_ms``, ``landmark_fit_ms``,
+  ``landmark_fit_pack_ms``, ``landmark_fit_draw_ms``; ``landmark_margin_vs_fit`` the ratio), and
+  the outline error of the fits as :func:`~leafview.botany.batch_fit.outline_errors` measures it
+  (median / p95 / max, share within 1 % without a fold, rows; ``landmark_quick_within_target``:
+  the share of that fit's quick pass within the target alone, ``landmark_refit_share``: the
+  share it refitted); ``landmark_full_*``: a subset of the same leaves through the full batch fit
+  (:func:`~leafview.botany.batch_fit.fit_outlines`, with its per-leaf fallback).
 """
 
 from __future__ import annotations
@@ -46,7 +52,7 @@ from leafview.bench import PAPER_LEAVES_PER_S
 from leafview.bench.timing import bench_context, gl_info, median_time
 from leafview.botany.batch_fit import controls_from_params, fit_outlines, min_jacobians, outline_errors, split_outlines
 from leafview.botany.catalogue import catalogue_names, landmark_leaf, random_instance
-from leafview.botany.landmarks import outline, outlines
+from leafview.botany.landmarks import margin_params, outline, outlines
 from leafview.botany.outline_fit import fit_outline
 from leafview.botany.shapes import INSTANCE_TARGET, fit_instances, shapes_params
 from leafview.core.params import LeafParams, Transform
@@ -63,7 +69,7 @@ SIZE = (512, 512)
 SHAPES = ("ovate", "lanceolate", "cordate", "obovate-convex-concave", "reniform", "elliptic-extended-extended")
 
 
-def _instances(n: int) -> list[Any]:
+def _landmarks(n: int) -> list[Any]:
     return [random_instance(landmark_leaf(SHAPES[i % len(SHAPES)]), seed=i, amount=0.2) for i in range(n)]
 
 
@@ -113,15 +119,20 @@ def _draw_batch(ctx: moderngl.Context, resources: GpuResources, target: Offscree
 
 
 def _landmark_rates(ctx: moderngl.Context, res: dict[str, Any], quick: bool) -> None:
-    """Issue 20: landmark leaves per second end to end. Each repeat makes ``count`` random
-    instances of all 62 catalogue shapes and times, per leaf: *generate* (the instances and their
-    margins, :func:`~leafview.botany.landmarks.outlines`), *shader-ready* (Ω fitted to within 1 %
-    by :func:`~leafview.botany.shapes.fit_instances`, what ``leafview shapes`` uses: the quick batch
-    fit :func:`~leafview.botany.quick_fit.quick_fit_outlines` for all, the full batch fit for the
-    few it misses; then placed on a grid and packed into leaf records) and *draw* (upload and one instanced draw of the batch, as ``render_per_s``).
-    The fitted margins' outline error is then measured (untimed) with
-    :func:`~leafview.botany.batch_fit.outline_errors`. Side by side, a subset goes through the
-    full batch fit (:func:`~leafview.botany.batch_fit.fit_outlines`, with its per-leaf fallback)."""
+    """Issue 20: landmark leaves per second end to end, two ways side by side on the same random
+    instances of all 62 catalogue shapes, interleaved in each repeat. Per leaf:
+
+    * **margin** (``landmark_*``, the headline): *generate* the instances
+      (:func:`~leafview.botany.catalogue.random_instance`), make them *shader-ready* (their
+      margins in closed form, :func:`~leafview.botany.landmarks.margin_params`, placed and packed
+      into leaf records: the shader draws the landmark B-spline itself, nothing is fitted) and
+      *draw* them (upload and one instanced draw of the batch, as ``render_per_s``);
+    * **fit** (``landmark_fit_*``): the same instances' margins sampled
+      (:func:`~leafview.botany.landmarks.outlines`), Ω fitted to within 1 % by
+      :func:`~leafview.botany.shapes.fit_instances` (the quick batch fit, the full batch fit for
+      the few it misses), placed, packed and drawn. The fitted margins' outline error is then
+      measured (untimed) with :func:`~leafview.botany.batch_fit.outline_errors`. A subset also
+      goes through the full batch fit alone (``landmark_full_*``)."""
     names = catalogue_names()
     count, repeats, n_full = (248, 3, 62) if quick else (992, 5, 124)
     bases = [landmark_leaf(names[i % len(names)]) for i in range(count)]
@@ -131,12 +142,24 @@ def _landmark_rates(ctx: moderngl.Context, res: dict[str, Any], quick: bool) -> 
             target.use()
             warm = pack_leaves(_scatter(_warm_leaves(), 2))
             _draw_batch(ctx, resources, target, *warm)      # compile the programs once
-            stages: dict[str, list[float]] = {"generate": [], "fit": [], "pack": [], "draw": []}
+            _draw_batch(ctx, resources, target, *pack_leaves(_scatter(margin_params(bases[:2]), 2)))
+            stages: dict[str, list[float]] = {"generate": [], "ready": [], "draw": []}
+            fit_stages: dict[str, list[float]] = {"generate": [], "fit": [], "pack": [], "draw": []}
             cpu: list[float] = []
             fitted, rings, names_now, instance_fit = None, None, [], None
             for rep in range(repeats):
                 c0, t0 = time.process_time(), time.perf_counter()
                 leaves = [random_instance(bases[i], seed=rep * count + i, amount=0.2) for i in range(count)]
+                t1 = time.perf_counter()
+                records, tables = pack_leaves(_scatter(margin_params(leaves), count))
+                t2 = time.perf_counter()
+                _draw_batch(ctx, resources, target, records, tables)
+                t3 = time.perf_counter()
+                cpu.append((time.process_time() - c0) / count)
+                for key, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2)):
+                    stages[key].append(dt / count)
+
+                t0 = time.perf_counter()
                 rings = outlines(leaves, 128)
                 t1 = time.perf_counter()
                 names_now = [leaf.name for leaf in leaves]
@@ -147,9 +170,9 @@ def _landmark_rates(ctx: moderngl.Context, res: dict[str, Any], quick: bool) -> 
                 t3 = time.perf_counter()
                 _draw_batch(ctx, resources, target, records, tables)
                 t4 = time.perf_counter()
-                cpu.append((time.process_time() - c0) / count)
-                for key, dt in zip(stages, (t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
-                    stages[key].append(dt / count)
+                gen = stages["generate"][-1] * count    # the same instances: generated once, above
+                for key, dt in zip(fit_stages, (gen + t1 - t0, t2 - t1, t3 - t2, t4 - t3)):
+                    fit_stages[key].append(dt / count)
             assert fitted is not None and rings is not None and instance_fit is not None
             per = {k: statistics.median(v) for k, v in stages.items()}
             res["landmark_count"] = count
@@ -161,6 +184,11 @@ def _landmark_rates(ctx: moderngl.Context, res: dict[str, Any], quick: bool) -> 
             res["landmark_cpu_ms"] = 1e3 * statistics.median(cpu)
             res["landmark_vs_paper_550"] = res["landmark_leaves_per_s"] / PAPER_LEAVES_PER_S
             res["landmark_draw_only_per_s"] = 1.0 / per["draw"]
+            fper = {k: statistics.median(v) for k, v in fit_stages.items()}
+            for key, value in fper.items():
+                res[f"landmark_fit_{key}_ms" if key != "fit" else "landmark_fit_ms"] = 1e3 * value
+            res["landmark_fit_leaves_per_s"] = 1.0 / sum(fper.values())
+            res["landmark_margin_vs_fit"] = res["landmark_leaves_per_s"] / res["landmark_fit_leaves_per_s"]
             right, left = split_outlines(rings)
             ctrl = controls_from_params(fitted)
             measured = outline_errors(ctrl, right, left)[:, 0]
@@ -182,7 +210,7 @@ def _landmark_rates(ctx: moderngl.Context, res: dict[str, Any], quick: bool) -> 
             t2 = time.perf_counter()
             res["landmark_full_count"] = n_full
             res["landmark_full_fit_ms"] = 1e3 * (t1 - t0) / n_full
-            res["landmark_full_leaves_per_s"] = 1.0 / (per["generate"] + (t2 - t0) / n_full)
+            res["landmark_full_leaves_per_s"] = 1.0 / (fper["generate"] + (t2 - t0) / n_full)
             res.update(_error_figures("landmark_full_fit", full.errors, full.min_jacobian, full.rows))
             res["landmark_full_fit_fallback"] = full.n_fallback
             res["landmark_fit_speedup"] = res["landmark_full_fit_ms"] / res["landmark_fit_ms"]
@@ -213,7 +241,7 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
                                "triangles_per_leaf": 2 * (GRID[0] - 1) * (GRID[1] - 1)}
         n_fast, n_polish = (12, 3) if quick else (60, 30)
         t0 = time.perf_counter()
-        leaves = _instances(n_fast)
+        leaves = _landmarks(n_fast)
         rings = [outline(leaf, 128) for leaf in leaves]
         res["landmark_per_s"] = n_fast / (time.perf_counter() - t0)
 
@@ -250,6 +278,11 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
         te, _ = _frame_time(ctx, extended, 3 if quick else 7)
         res["quartic_frame_ms"], res["extended_frame_ms"] = 1e3 * tq, 1e3 * te
         res["extended_vs_quartic_frame"] = te / tq
+        # the landmark margin drawn as the silhouette (leafview.core.margin): its cost in the shader
+        drawn_margins = _scatter(margin_params(_landmarks(n_fast)), count)
+        tm, _ = _frame_time(ctx, drawn_margins, 3 if quick else 7)
+        res["margin_frame_ms"] = 1e3 * tm
+        res["margin_vs_quartic_frame"] = tm / tq
         res["record_bytes"] = LEAF_BLOCK.nbytes
         res["param_bytes"] = LEAF_BLOCK.parameter_nbytes
         _landmark_rates(ctx, res, quick)
@@ -274,6 +307,8 @@ def format_table(res: dict[str, Any]) -> str:
         ("  vs the paper's ~550 /s", f"{res['vs_paper_550']:.3g}×"),
         ("extended ÷ quartic frame time", f"{res['extended_vs_quartic_frame']:.2f}  "
          f"({res['extended_frame_ms']:.1f} / {res['quartic_frame_ms']:.1f} ms)"),
+        ("landmark margin ÷ quartic frame time", f"{res['margin_vs_quartic_frame']:.2f}  "
+         f"({res['margin_frame_ms']:.1f} / {res['quartic_frame_ms']:.1f} ms)"),
         ("leaf record: parameters / whole", f"{res['param_bytes']} B / {res['record_bytes']} B"),
     ]
     if "landmark_leaves_per_s" in res:
@@ -282,13 +317,16 @@ def format_table(res: dict[str, Any]) -> str:
                     f"  (within 1 %: {pct(res[key + '_within_target'])})")
 
         rows += [
-            (f"landmark leaves end to end ({res['landmark_count']} of all 62 shapes, 224 tri, 512²)",
-             f"{res['landmark_leaves_per_s']:,.1f} /s  (generate {res['landmark_generate_ms']:.3f} + fit "
-             f"{res['landmark_fit_ms']:.3f} + pack {res['landmark_pack_ms']:.3f} + draw "
-             f"{res['landmark_draw_ms']:.3f} ms/leaf)"),
+            (f"landmark leaves end to end, margin drawn ({res['landmark_count']} of all 62 shapes, 224 tri, 512²)",
+             f"{res['landmark_leaves_per_s']:,.1f} /s  (generate {res['landmark_generate_ms']:.3f} + shader-ready "
+             f"{res['landmark_ready_ms']:.3f} + draw {res['landmark_draw_ms']:.3f} ms/leaf; exact margin)"),
             ("  CPU time per leaf, all threads of this process", f"{res['landmark_cpu_ms']:.3f} ms"),
             ("  vs the paper's ~550 /s (end to end / draw only)", f"{res['landmark_vs_paper_550']:.3g}× / "
              f"{res['landmark_draw_only_per_s'] / res['paper_leaves_per_s']:.3g}×"),
+            ("landmark leaves end to end, Ω fitted (the same leaves)",
+             f"{res['landmark_fit_leaves_per_s']:,.1f} /s  (generate + sample {res['landmark_fit_generate_ms']:.3f} "
+             f"+ fit {res['landmark_fit_ms']:.3f} + pack {res['landmark_fit_pack_ms']:.3f} + draw "
+             f"{res['landmark_fit_draw_ms']:.3f} ms/leaf; margin path {res['landmark_margin_vs_fit']:.1f}× faster)"),
             ("  fit error (median / p95 / max)", errors("landmark_fit")),
             ("  quick pass within 1 % alone / refitted (timed above)",
              f"{100 * res['landmark_quick_within_target']:.1f} % / {100 * res['landmark_refit_share']:.1f} %"),

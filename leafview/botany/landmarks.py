@@ -55,7 +55,8 @@ from leafview.botany.hermite import (
     margin_pieces,
 )
 from leafview.core.limits import check_name
-from leafview.core.params import ParamError
+from leafview.core.margin import Margin, MarginSide
+from leafview.core.params import LeafParams, ParamError
 
 __all__ = [
     "SINGULAR_CONDITION",
@@ -69,6 +70,8 @@ __all__ = [
     "fit_margin_report",
     "hermite_knots",
     "margin_pieces",
+    "margins",
+    "margin_params",
     "outline",
     "outline_sides",
     "outlines",
@@ -507,3 +510,63 @@ def check_margin(leaf: LandmarkLeaf, n: int = 200) -> None:
         if k is not None:
             raise ParamError(which, f"the margin crosses itself near ({poly[k, 0]:.3f}, {poly[k, 1]:.3f}): "
                              "check the tangent angles of the tail or shoulder")
+
+
+# ---------------------------------------------------------------------------------------------
+# margins drawn as they are: the shader's landmark-margin silhouette (leafview.core.margin)
+# ---------------------------------------------------------------------------------------------
+
+def _side_margin(breaks: NDArray[np.float64], pieces: NDArray[np.float64]) -> MarginSide:
+    """A :class:`~leafview.core.margin.MarginSide` from one side's Bézier spans (as
+    :class:`~leafview.botany.hermite.MarginPieces` holds them): the landmark knots and, per gap,
+    the landmark, the two inner points and (last) the apex."""
+    gaps = pieces.shape[0] // 2
+    pts = np.empty((3 * gaps + 1, 2))
+    pts[0:3 * gaps:3] = pieces[0::2, 0]
+    pts[1:3 * gaps:3] = pieces[0::2, 1]
+    pts[2:3 * gaps:3] = pieces[1::2, 1]
+    pts[-1] = pieces[-1, 2]
+    pts[0], pts[-1] = (0.0, 0.0), (0.0, 1.0)
+    return MarginSide(tuple(float(k) for k in breaks[0::2]), tuple((float(x), float(y)) for x, y in pts))
+
+
+def margins(leaves: Sequence[LandmarkLeaf]) -> list[Margin]:
+    """The margins of eqs 2-6 of many leaves, as the shader draws them (no Ω fit): sides with the
+    same number of landmarks are built together in closed form
+    (:func:`~leafview.botany.hermite.margin_pieces`)."""
+    sides: list[SideLandmarks] = []
+    index: dict[int, int] = {}
+    rows = np.empty((len(leaves), 2), dtype=np.int64)
+    for k, leaf in enumerate(leaves):
+        if not isinstance(leaf, LandmarkLeaf):
+            raise ParamError(f"leaves[{k}]", f"expected a LandmarkLeaf, got {type(leaf).__name__}")
+        for j, side in enumerate((leaf.right, leaf.left)):
+            row = index.get(id(side))
+            if row is None:
+                row = index[id(side)] = len(sides)
+                sides.append(side)
+            rows[k, j] = row
+    marks = [side.landmarks() for side in sides]
+    built: list[MarginSide | None] = [None] * len(sides)
+    by_count: dict[int, list[int]] = {}
+    for i, (pts, _) in enumerate(marks):
+        by_count.setdefault(len(pts), []).append(i)
+    for group in by_count.values():
+        mp = margin_pieces(np.stack([marks[i][0] for i in group]), np.stack([marks[i][1] for i in group]))
+        for j, i in enumerate(group):
+            built[i] = _side_margin(mp.breaks[j], mp.pieces[j])
+    out = []
+    for r, lft in rows:
+        right, left = built[r], built[lft]
+        assert right is not None and left is not None
+        out.append(Margin(right, left))
+    return out
+
+
+def margin_params(leaves: Sequence[LandmarkLeaf], template: LeafParams | None = None) -> list[LeafParams]:
+    """Leaves drawn with their landmark margins (:func:`margins`): ``template`` (default
+    :class:`~leafview.core.params.LeafParams`: a straight midrib, flat, default colours) with each
+    margin and the landmark leaf's name. The template's silhouette rows are not used; its midrib,
+    heights, material, jitter, ripples and bending are."""
+    base = LeafParams() if template is None else template
+    return [replace(base, margin=m, name=leaf.name or base.name) for leaf, m in zip(leaves, margins(leaves))]

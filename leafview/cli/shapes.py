@@ -7,6 +7,7 @@ Examples::
     leafview shapes --sheet -o catalogue.png          # every shape, labelled
     leafview shapes --names cordate reniform -o dir/  # one image each
     leafview shapes --names cordate --seed 3 -o c.png # a random instance (Fig. 8), fitted now
+    leafview shapes --sheet --margin -o margins.png   # the landmark margins themselves, nothing fitted
     leafview shapes --lobed maple -o maple.png        # a multilobed leaf (assets/compound/maple.toml)
 """
 
@@ -18,6 +19,8 @@ from pathlib import Path
 from typing import Any
 
 from leafview.atomic import outputs
+from leafview.botany.catalogue import landmark_leaf, random_instance
+from leafview.botany.landmarks import margin_params
 from leafview.botany.lobes import load_lobed_leaf
 from leafview.botany.shapes import fit_info, shape_names, shapes_params
 from leafview.cli.args import (
@@ -52,6 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--size", type=pixels, default=128, help="pixels per image (default 128)")
     p.add_argument("--view", choices=VIEWS, default="top", help="camera (default top)")
     p.add_argument("--seed", type=int, help="render a random instance of each shape (±20 %%, Fig. 8), fitted now")
+    p.add_argument("--margin", action="store_true",
+                   help="draw each shape's landmark margin itself (exact, nothing fitted) instead of its Ω fit")
     p.add_argument("--lobed", metavar="NAME|FILE", help="render a multilobed leaf: a file or a built-in "
                    "(maple, oak, ...) from assets/compound")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
@@ -92,7 +97,11 @@ def _output(args: argparse.Namespace, count: int) -> tuple[str, Path]:
     return "dir", output_directory(out)
 
 
-def _leaves(names: list[str], seed: int | None, quiet: bool) -> list[LeafParams]:
+def _leaves(names: list[str], seed: int | None, quiet: bool, margin: bool = False) -> list[LeafParams]:
+    if margin:   # the landmark margins drawn as they are: no fit, no progress to show
+        leaves = [landmark_leaf(n) if seed is None else random_instance(landmark_leaf(n), seed) for n in names]
+        params = margin_params(leaves)
+        return params if seed is None else [p.replace(name=f"{n}#{seed}") for p, n in zip(params, names)]
     if seed is None:
         return [shapes_params(n) for n in names]
     bar = progress_bar(names, unit="fit", desc="fitting instances", quiet=quiet)
@@ -102,7 +111,7 @@ def _leaves(names: list[str], seed: int | None, quiet: bool) -> list[LeafParams]
 def _render_shapes(args: argparse.Namespace, names: list[str]) -> int:
     t0 = time.perf_counter()
     mode, out = _output(args, len(names))
-    leaves = _leaves(names, args.seed, args.quiet)
+    leaves = _leaves(names, args.seed, args.quiet, args.margin)
     renderer = default_renderer()
     images: list[Any] = []
     with progress_bar(total=len(leaves), unit="leaf", desc="rendering", quiet=args.quiet) as bar:
@@ -129,8 +138,8 @@ def _render_shapes(args: argparse.Namespace, names: list[str]) -> int:
 
 
 def _render_lobed(args: argparse.Namespace) -> int:
-    if args.names or args.sheet or args.seed is not None:
-        raise UsageError("--lobed renders one multilobed leaf: drop --names, --sheet and --seed")
+    if args.names or args.sheet or args.seed is not None or args.margin:
+        raise UsageError("--lobed renders one multilobed leaf: drop --names, --sheet, --seed and --margin")
     lobed = load_lobed_leaf(args.lobed)
     if args.output is None:
         print(lobed.describe())
@@ -154,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
         return _render_lobed(args)
     names = _names(args)
     if args.output is None:
-        if args.sheet or args.seed is not None:
-            raise UsageError("--sheet and --seed render images: give -o FILE or -o DIR")
+        if args.sheet or args.seed is not None or args.margin:
+            raise UsageError("--sheet, --seed and --margin render images: give -o FILE or -o DIR")
         return _list(names)
     return _render_shapes(args, names)

@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from leafview.core.bezier import bernstein, derivative_points
 from leafview.core.limits import MAX_GRID
+from leafview.core.margin import margin_frame
 from leafview.core.params import Jitter, LeafParams
 from leafview.errors import ParamError
 
@@ -196,6 +197,9 @@ def blade_partials(params: LeafParams, u: ArrayLike, v: ArrayLike) -> tuple[Part
         c[3][mask], c[1][mask], c[2][mask] = pos[:, 0], pos[:, 1], pos[:, 2]
         dc[3][mask], dc[1][mask], dc[2][mask] = der[:, 0], der[:, 1], der[:, 2]
 
+    if params.margin is not None:
+        _margin_curves(params, sigma, vv, b4, db4, c, dc)
+
     b = _basis(3, s)  # (N, 4)
     db = _basis(2, s) @ np.array([[-3, 3, 0, 0], [0, -3, 3, 0], [0, 0, -3, 3]], dtype=np.float64)
     L = np.einsum("nk,knd->nd", b, c)
@@ -207,6 +211,31 @@ def blade_partials(params: LeafParams, u: ArrayLike, v: ArrayLike) -> tuple[Part
     if jit.enabled and jit.amplitude > 0.0:
         L, Lu, Lv, Luv = _add_jitter(params, s, sigma, vv, pa_d, L, Lu, Lv, Luv)
     return Partials(L, Lu, Lv, Luv), s, sigma, vv, c[0], dc[0]
+
+
+def _margin_curves(params: LeafParams, sigma: Arr, vv: Arr, b4: Arr, db4: Arr, c: Arr, dc: Arr) -> None:
+    """A leaf with a landmark margin (:mod:`leafview.core.margin`): S, F and G of each side become
+    ``P + σ Q k + z ẑ`` (k = 1, 1/3, 2/3) with P = A(y(v)) and Q = x(v) n(y(v)) from the side's
+    quadratic B-spline (Garg & Leow 2011, eqs 2-6), the heights z the paper's quartics (eqs 3-4)."""
+    margin = params.margin
+    assert margin is not None
+    sh = params.shape
+    axis = sh.axis_points()
+    for sg in (1.0, -1.0):
+        mask = sigma == sg
+        if not mask.any():
+            continue
+        side = margin.side(sg)
+        xy, dxy = side.evaluate(vv[mask])
+        P, Q, dP, dQ = margin_frame(xy[0], dxy[0], axis)
+        for k, (frac, zz) in zip((3, 1, 2), ((1.0, sh.zs), (1 / 3, sh.zf), (2 / 3, sh.zg))):
+            zc = np.r_[0.0, np.asarray(zz, np.float64), 0.0]
+            z = b4[mask] @ zc
+            dz = db4[mask] @ (4.0 * np.diff(zc))
+            c[k][mask] = P + (sg * frac) * Q
+            c[k][mask, 2] += z
+            dc[k][mask] = dP + (sg * frac) * dQ
+            dc[k][mask, 2] += dz
 
 
 def tip_taper(vv: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

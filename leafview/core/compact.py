@@ -54,7 +54,7 @@ __all__ = ["COMPACT_VERSION", "OPTIONAL_GROUPS", "compact_dict", "dumps", "dumps
 
 COMPACT_VERSION = 1
 OPTIONAL_GROUPS = ("jitter", "material", "transform", "ripple", "bending", "venation", "lobes")
-_LEAF_KEYS = ("name", "omega", "half", *OPTIONAL_GROUPS, "texture")
+_LEAF_KEYS = ("name", "omega", "half", *OPTIONAL_GROUPS, "texture", "margin")
 
 
 # -- numbers ------------------------------------------------------------------------------
@@ -122,6 +122,8 @@ def compact_dict(params: LeafParams, *, digits: int | None = None, version: bool
             out[group] = kept
     if params.texture is not None:
         out["texture"] = params.texture.to_dict()
+    if params.margin is not None:
+        out["margin"] = _map_floats(params.margin.to_dict(), digits)
     return out
 
 
@@ -210,7 +212,7 @@ def parse_compact(doc: Any, *, where: str = "", version: bool = True) -> LeafPar
         full: dict[str, Any] = {"schema": SCHEMA_VERSION, "shape": shape}
         if "name" in doc:
             full["name"] = doc["name"]
-        for group in (*OPTIONAL_GROUPS, "texture"):
+        for group in (*OPTIONAL_GROUPS, "texture", "margin"):
             if group in doc:
                 full[group] = doc[group]
         try:

@@ -38,6 +38,7 @@ from leafview.core.display import png_of
 from leafview.core.fieldspec import FieldSpec, check_choice, check_range, number, spec_field
 from leafview.core.limits import MAX_SILHOUETTE_ROWS, check_name
 from leafview.core.lobes import BranchTurtle, Lobes, lobes_dict, parse_lobes_field
+from leafview.core.margin import Margin
 from leafview.core.texture import LeafTexture, parse_texture
 from leafview.core.venation import VeinEdit, Venation, parse_edits, venation_dict
 from leafview.errors import ParamError
@@ -290,6 +291,18 @@ class LeafParams:
     lobes: Lobes = field(default_factory=Lobes)            # leafview.core.lobes; unlobed by default
     name: str = ""
     texture: LeafTexture | None = None   # front/back images addressed by (u, v) (leafview.core.texture)
+    margin: Margin | None = None         # a landmark margin in place of Ω's silhouette (leafview.core.margin)
+
+    def __post_init__(self) -> None:
+        if self.margin is None:
+            return
+        if not isinstance(self.margin, Margin):
+            raise ParamError("margin", f"expected a Margin, got {type(self.margin).__name__}")
+        if self.shape.extended:
+            raise ParamError("margin", "a leaf with a landmark margin takes its heights from the paper's three "
+                                       "silhouette rows: its shape may not be extended (rows or tilts)")
+        if self.lobes.enabled:
+            raise ParamError("margin", "a lobed leaf has its own margin: give either [lobes] or margin")
 
     # -- Ω as a flat vector -------------------------------------------------------------------
     def to_vector(self) -> NDArray[np.float64]:
@@ -330,6 +343,8 @@ class LeafParams:
             out[group] = {f.name: _plain(getattr(obj, f.name)) for f in fields(obj)}
         if self.texture is not None:
             out["texture"] = self.texture.to_dict()
+        if self.margin is not None:
+            out["margin"] = self.margin.to_dict()
         return out
 
     @classmethod
@@ -435,7 +450,7 @@ def field_specs() -> dict[str, FieldSpec]:
 _GROUPS: dict[str, type] = {"shape": Shape, "jitter": Jitter, "material": Material, "transform": Transform,
                              "ripple": Ripple, "bending": Bending, "venation": Venation,
                              "lobes": Lobes}
-_TOP_KEYS = {"schema", "name", "texture", *_GROUPS}
+_TOP_KEYS = {"schema", "name", "texture", "margin", *_GROUPS}
 
 
 def _plain(value: Any) -> Any:
@@ -580,4 +595,5 @@ def parse_params(data: Any) -> LeafParams:
     groups = {g: _parse_group(cls, data[g], g, required=(g == "shape"))
               for g, cls in _GROUPS.items() if g in data}
     texture = parse_texture(data["texture"]) if "texture" in data else None
-    return LeafParams(name=name, texture=texture, **groups)
+    margin = Margin.from_dict(data["margin"]) if "margin" in data else None
+    return LeafParams(name=name, texture=texture, margin=margin, **groups)

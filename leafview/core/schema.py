@@ -44,6 +44,7 @@ from leafview.core.lobes import (
     lobes_dict,
     turtle_specs,
 )
+from leafview.core.margin import MARGIN_LIMIT, MAX_GAPS
 from leafview.core.texture import MAX_TEXTURE_PATH
 from leafview.core.venation import MAX_EDITS, VeinEdit, Venation, edit_specs, venation_dict
 
@@ -57,7 +58,7 @@ def _groups() -> dict[str, type]:
     """Group name -> dataclass, in LeafParams field order."""
     out: dict[str, type] = {}
     for f in fields(P.LeafParams):
-        if f.name not in ("name", "texture"):
+        if f.name not in ("name", "texture", "margin"):
             if f.default_factory is MISSING:
                 raise TypeError(f"LeafParams.{f.name} is a group without a default factory")
             out[f.name] = type(f.default_factory())
@@ -195,6 +196,23 @@ def _texture_schema() -> dict[str, Any]:
             "required": ["front"], "additionalProperties": False}
 
 
+def _margin_schema() -> dict[str, Any]:
+    """The ``margin`` table (:mod:`leafview.core.margin`): a landmark margin in place of Ω's silhouette."""
+    xy = {"type": "array", "items": {"type": "number", "minimum": -MARGIN_LIMIT, "maximum": MARGIN_LIMIT},
+          "minItems": 2, "maxItems": 2}
+    side = {"type": "object",
+            "description": ("one side in its own frame (x across the blade, y along the midrib): N knots "
+                            "from 0 to 1 and 3N - 2 points p0, a0, b0, p1, ..., from [0, 0] to [0, 1]"),
+            "properties": {"knots": {"type": "array", "items": {"type": "number", "minimum": 0, "maximum": 1},
+                                     "minItems": 2, "maxItems": MAX_GAPS + 1},
+                           "points": {"type": "array", "items": xy, "minItems": 4, "maxItems": 3 * MAX_GAPS + 1}},
+            "required": ["knots", "points"], "additionalProperties": False}
+    return {"type": "object",
+            "description": ("A landmark margin (quadratic B-spline through landmarks, Garg & Leow 2011, eqs 2-6) "
+                            "drawn in place of the silhouette rows; left copies right when absent."),
+            "properties": {"right": side, "left": side}, "required": ["right"], "additionalProperties": False}
+
+
 def leaf_schema() -> dict[str, Any]:
     """The JSON Schema (draft 2020-12) of a leaf parameter document."""
     specs = P.field_specs()
@@ -225,6 +243,7 @@ def leaf_schema() -> dict[str, Any]:
                                 for n in range(3, _max_rows() + 1)]
         props[group] = gschema
     props["texture"] = _texture_schema()
+    props["margin"] = _margin_schema()
     return {
         "$schema": DIALECT,
         "$id": SCHEMA_ID,
@@ -279,6 +298,7 @@ def compact_leaf_schema(version: str) -> dict[str, Any]:
     props["half"] = {"title": specs["shape.half"].label, **_field(specs["shape.half"]),
                      "description": "only for a one-sided leaf; absent means both halves (0)"}
     props["texture"] = full["texture"]
+    props["margin"] = full["margin"]
     for group in OPTIONAL_GROUPS:
         g = copy.deepcopy(full[group])
         g.pop("required", None)

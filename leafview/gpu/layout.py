@@ -39,6 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from leafview.botany.vein_shading import glsl_constants as vein_shading_glsl
 from leafview.core.blade import APEX, BASE, JITTER_TABLE_SIZE, jitter_table
+from leafview.core.margin import MARGIN_TEXELS, SIDE_TEXELS
 from leafview.core.params import MAX_SILHOUETTE_ROWS, LeafParams
 from leafview.core.texture import LeafTexture
 from leafview.deform.beam import BEND_SAMPLES, bend_profile
@@ -485,6 +486,8 @@ BRANCH_RIPPLE = 1   # ripples on (leaf_ripple_on)
 BRANCH_BEND = 2     # bending on (leaf_bend_on)
 BRANCH_ROWS = 4     # times the silhouette rows N of an extended leaf (leaf_rows), 0 otherwise
 BRANCH_LOBE = BRANCH_ROWS * (MAX_SILHOUETTE_ROWS + 1)   # times the lobe layer + 1 (leaf_lobe_layer), 0 unlobed
+MARGIN_ROWS = 1     # leaf_rows of a leaf with a landmark margin (leafview.core.margin): no extended
+                    # silhouette has 1 row, so the code is free; the shader takes margin_silhouette
 _MAX_BRANCH_CODE = 1 << 24   # the code is a float32 component: exact integers up to 2^24
 
 
@@ -509,11 +512,18 @@ def without_derived(records: np.ndarray) -> NDArray[Any]:
     """A copy of LeafData ``records`` with every derived member and derived slot zeroed: what the
     packer wrote, whether or not the prepare pass has run since."""
     out = np.array(records, copy=True)
+    flat = out.reshape(-1)
+    margin = np.atleast_1d(read_slot(flat, "leaf_rows") == MARGIN_ROWS)
+    kept = read_margin(flat[margin])              # a margin leaf's texels live in derived members
     for name in LEAF_BLOCK.derived:
         out[name] = 0
     for slot in LEAF_SLOTS:
         if slot.derived:
             slot.view(out)[...] = 0
+    if margin.any():
+        sub = flat[margin]
+        write_margin(sub, kept)
+        flat[margin] = sub
     return out
 
 
@@ -529,6 +539,7 @@ def accessors_glsl() -> str:
     lines += [slot.glsl() for slot in LEAF_SLOTS]
     lines += [f"#define LEAF_BRANCH_RIPPLE {BRANCH_RIPPLE}", f"#define LEAF_BRANCH_BEND {BRANCH_BEND}",
               f"#define LEAF_BRANCH_ROWS {BRANCH_ROWS}", f"#define LEAF_BRANCH_LOBE {BRANCH_LOBE}",
+              f"#define LEAF_MARGIN_ROWS {MARGIN_ROWS}", f"#define MARGIN_SIDE_TEXELS {SIDE_TEXELS}",
               "#define leaf_has_ripple(rec) ((leaf_branches(rec) & LEAF_BRANCH_RIPPLE) != 0)",
               "#define leaf_has_bend(rec) ((leaf_branches(rec) & LEAF_BRANCH_BEND) != 0)",
               "#define leaf_branch_rows(rec) ((leaf_branches(rec) % LEAF_BRANCH_LOBE) / LEAF_BRANCH_ROWS)",
@@ -539,6 +550,30 @@ def accessors_glsl() -> str:
     for accessor, member in PAIR_MEMBERS.items():
         lines.append(f"#define {accessor}(rec, j) leafview_pair_half((rec).{member}[(j) / 2], (j))")
     return "\n".join(lines) + "\n"
+
+
+# A leaf with a landmark margin (leaf_rows = MARGIN_ROWS) has no extended silhouette: the extended
+# members hold its MARGIN_TEXELS margin texels instead (leafview.core.margin, Margin.texels), in this
+# order. The prepare pass writes none of them for such a leaf (it takes the quartic path).
+MARGIN_MEMBERS = (("sil_rows", SIL_EXTRA_ROWS), ("sil_fg", _PAIRS(SIL_EXTRA_ROWS)), ("sil_axis", SIL_EXTRA_ROWS),
+                  ("sil_heights", SIL_EXTRA_ROWS), ("sil_tilt", _PAIRS(MAX_SILHOUETTE_ROWS)))
+assert sum(n for _, n in MARGIN_MEMBERS) == MARGIN_TEXELS, "the margin texels must fill the extended members"
+
+
+def write_margin(records: np.ndarray, texels: ArrayLike) -> None:
+    """Mark ``records`` (one or (N,)) as landmark-margin leaves and store their margin texels
+    ((MARGIN_TEXELS, 4) or (N, MARGIN_TEXELS, 4)) in :data:`MARGIN_MEMBERS`."""
+    t = np.asarray(texels, np.float32)
+    write_slot(records, "leaf_rows", float(MARGIN_ROWS))
+    k = 0
+    for name, n in MARGIN_MEMBERS:
+        records[name] = t[..., k:k + n, :]
+        k += n
+
+
+def read_margin(records: np.ndarray) -> NDArray[np.float32]:
+    """The margin texels stored by :func:`write_margin`, (..., MARGIN_TEXELS, 4)."""
+    return np.concatenate([np.asarray(records[name], np.float32) for name, _ in MARGIN_MEMBERS], axis=-2)
 
 
 def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: int = 0,
@@ -574,6 +609,8 @@ def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: 
         rec["tilt"] = 0.0
         rec["sil_rows"] = 0.0
         rec["sil_fg"] = 0.0
+    if params.margin is not None:
+        write_margin(rec, params.margin.texels())
     write_slot(rec, "leaf_jitter_amplitude", j.amplitude if j.enabled else 0.0)
     write_slot(rec, "leaf_jitter_density", j.density)
     write_slot(rec, "leaf_jitter_size", JITTER_TABLE_SIZE)
@@ -941,9 +978,31 @@ def row_glsl() -> str:
         first = int(fields[name][1]) // 16
         lines.append(f"#define ROW_{name}(i) leaf_row_texel({first} + (i))" if count > 1
                      else f"#define ROW_{name} leaf_row_texel({first})")
+    # ROW_margin(k): texel k of a landmark-margin leaf (MARGIN_MEMBERS, in order)
+    offsets = [int(fields[name][1]) // 16 for name, _ in MARGIN_MEMBERS]
+    runs: list[tuple[int, int, int]] = []      # (first k, first texel, count) of contiguous texels
+    k = 0
+    for (_name, n), first in zip(MARGIN_MEMBERS, offsets):
+        if runs and runs[-1][1] + runs[-1][2] == first:
+            runs[-1] = (runs[-1][0], runs[-1][1], runs[-1][2] + n)
+        else:
+            runs.append((k, first, n))
+        k += n
+    expr = f"{runs[-1][1] - runs[-1][0]} + (k)"
+    for k0, first, n in reversed(runs[:-1]):
+        expr = f"(k) < {k0 + n} ? {first - k0} + (k) : {expr}"
+    lines.append(f"#define ROW_margin(k) leaf_row_texel({expr})")
     lines.append("#else")
     for name, count in members:
         lines.append(f"#define ROW_{name}(i) (LEAF_ROW.{name}[i])" if count > 1 else f"#define ROW_{name} (LEAF_ROW.{name})")
+    cases, k = [], 0
+    for name, n in MARGIN_MEMBERS:
+        cases.append((k + n, f"LEAF_ROW.{name}[clamp((k) - {k}, 0, {n - 1})]"))
+        k += n
+    expr = cases[-1][1]
+    for limit, pick in reversed(cases[:-1]):
+        expr = f"((k) < {limit} ? {pick} : {expr})"
+    lines.append(f"#define ROW_margin(k) {expr}")
     lines.append("#endif")
     lines += [slot.row_glsl() for slot in LEAF_SLOTS if slot.member not in vertex]
     for accessor, member in PAIR_MEMBERS.items():

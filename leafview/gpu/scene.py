@@ -147,7 +147,8 @@ def species_tables(scene: Scene, vein_layers: NDArray[np.int32] | None = None,
     a species per leaf) share one *template* record, packed once; each species' Ω and colours then
     go straight into its row, vectorised, and the bend profiles of the bent ones are solved
     together, once per distinct shape, bending and frame (:func:`leafview.deform.beam.bend_profiles`).
-    An extended silhouette is a template of its own (its further rows depend on its whole shape).
+    An extended silhouette is a template of its own (its further rows depend on its whole shape), and
+    so is a landmark margin (:mod:`leafview.core.margin`; its texels fill the extended members).
     Each species' texture layers are those of :func:`~leafview.gpu.layout.texture_keys` of the
     species (the array texture :class:`SceneRenderer` binds), its vein layer ``vein_layers[i]``
     (default: :func:`leafview.gpu.vein_draw.fresh_layers` of the species, the layers of a field
@@ -166,7 +167,7 @@ def species_tables(scene: Scene, vein_layers: NDArray[np.int32] | None = None,
     for i, sp in enumerate(scene.species):
         s, m, t = sp.shape, sp.material, sp.transform
         # the objects of the key are the species' own, alive as long as the scene: ids stay unique
-        parts = (s if s.extended else s.half, sp.jitter, m.translucency, t, sp.ripple, sp.bending)
+        parts = (s if s.extended else s.half, sp.jitter, m.translucency, t, sp.ripple, sp.bending, sp.margin)
         ids = tuple(map(id, parts))
         k = by_identity.get(ids)
         if k is None:
