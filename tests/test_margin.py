@@ -201,3 +201,18 @@ def test_margin_leaves_look_like_their_shapes(gl, request):
     top = rows[0] + 2
     assert not ob[top, mid] and ob[top, cols[0]:mid].any() and ob[top, mid:cols[-1] + 1].any()
     assert_matches_reference(img, "margin_shapes", request)
+
+
+def test_width_edit_scales_the_margin():
+    """The artist's width edit (Chaurasia & Beardsley 2017, Fig. 7a) widens a margin leaf too:
+    every edge point moves out by the factor, the midrib stays."""
+    from leafview.core.edits import scale_width
+
+    leaf = margin_params(_instances(1, seed=12))[0]
+    wide = scale_width(leaf, 1.5)
+    v = np.linspace(0.0, 1.0, 33)
+    for u in (-1.0, 1.0):
+        a = leafview.evaluate(leaf, np.full_like(v, u), v)
+        b = leafview.evaluate(wide, np.full_like(v, u), v)
+        np.testing.assert_allclose(b[:, 0], 1.5 * a[:, 0], atol=1e-12)
+        np.testing.assert_allclose(b[:, 1], a[:, 1], atol=1e-12)

@@ -355,3 +355,25 @@ def test_dragging_a_knot_edits_lobes_branches_as_one_undo_step(ui, maple_state):
     assert 80.0 <= edit.bend[1] <= 100.0, edit.bend    # soft range ±180: 3/4 of the height is +90
     assert edit.twist == edit.turn == (0.0,) * 4
     assert maple_state.undo() and maple_state.params.lobes.branches == () and not maple_state.can_undo
+
+
+# -- a leaf drawn with its landmark margin (leafview.core.margin) ------------------------------------
+def test_margin_leaf_says_so_and_fits_omega_on_request(ui, presets):
+    from leafview.botany.catalogue import landmark_leaf
+    from leafview.botany.landmarks import margin_params
+
+    leaf = margin_params([landmark_leaf("cordate")], presets["ovate"].replace(name="cordate"))[0]
+    st = ViewerState(leaf, None, builtin_dir=preset_dir())
+    panel = ParamPanel(st)
+    panel.expand_all = True
+    for _ in range(2):
+        ui.frame(_panel_draw(panel))
+    assert "margin-note" in panel.rects and "margin:fit" in panel.rects
+    assert "edit:width" in panel.rects                        # the width edit scales the margin
+    ui.click(_panel_draw(panel), panel.rects["margin:fit"])
+    assert st.params.margin is None and st.params.shape != leaf.shape
+    assert st.params.material == leaf.material
+    panel.rects.clear()
+    ui.frame(_panel_draw(panel))
+    assert "margin-note" not in panel.rects and "shape.a1" in panel.rects
+    assert st.undo() and st.params.margin == leaf.margin     # one undo step back to the margin

@@ -26,6 +26,7 @@ from leafview.app.lobe_panel import LobePanel
 from leafview.app.photo_reference import close_photo, fit_reference, report_line
 from leafview.app.state import ViewerState
 from leafview.app.wind_panel import wind_widgets
+from leafview.botany.shapes import omega_of_margin
 from leafview.core.edits import curve_axis, curve_longitudinal, scale_width, skew_axis
 from leafview.core.params import FieldSpec, LeafParams
 
@@ -197,6 +198,8 @@ class ParamPanel:
                                 "and are hidden")
             imgui.pop_text_wrap_pos()
             self._record("hidden-groups")
+        if self.state.params.margin is not None:
+            self.draw_margin_note()
         for group, paths in groups_of(specs).items():
             if lobed and group in OMEGA_ONLY:
                 continue
@@ -215,6 +218,18 @@ class ParamPanel:
                     for path in paths:
                         self.draw_field(path, specs[path])
                 imgui.pop_id()
+
+    def draw_margin_note(self) -> None:
+        """A leaf drawn with its landmark margin (leafview.core.margin): the silhouette rows below
+        are not drawn; a button replaces the margin by Ω fitted to it, whose rows can be edited."""
+        imgui.push_text_wrap_pos(0.0)
+        imgui.text_disabled("landmark margin (Garg & Leow 2011): the shader draws the B-spline itself, so the "
+                            "silhouette rows are not drawn; axis, heights, width and the other groups apply")
+        imgui.pop_text_wrap_pos()
+        self._record("margin-note")
+        if imgui.button("Fit Ω to the margin (edit its rows)##margin-fit"):
+            self.state.apply(lambda p: omega_of_margin(p).params)   # one undo step
+        self._record("margin:fit")
 
     # -- the artist edits of sec. 6 -------------------------------------------------------------
     def _relative_slider(self, key: str, label: str, lo: float, hi: float, fmt: str,

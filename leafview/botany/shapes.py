@@ -15,7 +15,7 @@ linear fit only (``polish=False``; then up to about 3.5 % off).
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from difflib import get_close_matches
 from functools import lru_cache
 from pathlib import Path
@@ -37,7 +37,7 @@ from leafview.resources import asset_dir
 INSTANCE_TARGET = INSTANCE_FIT_TARGET
 _HAUSDORFF_SLACK = 5e-4     # half the 1e-3 densification step of outline_fit.hausdorff
 
-__all__ = ["INSTANCE_TARGET", "ShapeEntry", "ShapeFitInfo", "catalogue", "landmark_leaf", "shapes_dir",
+__all__ = ["INSTANCE_TARGET", "ShapeEntry", "ShapeFitInfo", "catalogue", "landmark_leaf", "omega_of_margin", "shapes_dir",
            "shape_names", "shapes_params", "fit_info", "fit_landmark_leaf", "fit_instances", "InstanceFit", "instances"]
 
 
@@ -192,6 +192,19 @@ def instances(names_or_leaves: LeafOrName | list[LeafOrName] | tuple[LeafOrName,
     if margin:
         return [p.replace(name=name) for p, name in zip(margin_params(leaves), names)]
     return fit_instances(outlines(leaves, n), target, names).params
+
+
+def omega_of_margin(params: LeafParams, *, polish: bool = True, n: int = 128) -> OutlineFit:
+    """Ω fitted to the landmark margin of ``params`` (:mod:`leafview.core.margin`), for a leaf
+    whose silhouette rows are to be edited: the fit's ``params`` is ``params`` with the fitted
+    shape and no margin (its material, transform, jitter, ripples and bending kept)."""
+    if params.margin is None:
+        raise ParamError("margin", "this leaf has no landmark margin to fit")
+    v = np.linspace(0.0, 1.0, n)
+    right = params.margin.right.evaluate(v)[0][0]
+    left = params.margin.left.evaluate(v)[0][0] * np.array([-1.0, 1.0])
+    fit = fit_outline(right=right, left=left, polish=polish, name=params.name)
+    return replace(fit, params=replace(params, shape=fit.params.shape, margin=None))
 
 
 @dataclass(frozen=True)

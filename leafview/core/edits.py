@@ -30,12 +30,14 @@ def _finite(name: str, x: float) -> float:
 
 def scale_width(params: LeafParams, factor: float) -> LeafParams:
     """Width scaling (Fig. 7a): multiply every lateral displacement x̄s_i (and hence F and G,
-    which sit at 1/3 and 2/3 of it, eq. 4) by ``factor`` (> 0)."""
+    which sit at 1/3 and 2/3 of it, eq. 4) by ``factor`` (> 0); a landmark margin
+    (:mod:`leafview.core.margin`) has its x scaled the same way."""
     f = _finite("factor", factor)
     if f <= 0:
         raise ParamError("factor", f"width factor must be positive, got {f!r}")
     rows = tuple((v, x * f, z) for v, x, z in params.shape.silhouette)
-    return _shape(params, silhouette=[list(r) for r in rows])
+    out = _shape(params, silhouette=[list(r) for r in rows])
+    return out if params.margin is None else out.replace(margin=params.margin.scaled_width(f))
 
 
 def skew_axis(params: LeafParams, dx1: float, dx2: float | None = None) -> LeafParams:

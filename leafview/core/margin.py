@@ -161,6 +161,13 @@ class Margin:
         left = MarginSide.from_dict(data["left"], f"{path}.left") if "left" in data else right
         return cls(right, left)
 
+    def scaled_width(self, factor: float) -> Margin:
+        """Both sides with every point's x (across the blade) times ``factor``."""
+        def scale(side: MarginSide) -> MarginSide:
+            return MarginSide(side.knots, tuple((x * factor, y) for x, y in side.points))
+        right = scale(self.right)
+        return Margin(right, right if self.left == self.right else scale(self.left))
+
     def side(self, sigma: float) -> MarginSide:
         """The side drawn for u ≥ 0 (σ = +1: the left side) or u < 0 (σ = -1: the right side)."""
         return self.left if sigma > 0 else self.right
