@@ -111,6 +111,7 @@ def test_cli_writes_frames_sheet_and_report(gl, tmp_path, capsys):
     (["lanceolate", "cordate", "--frames", "1"], "--frames"),
     (["lanceolate", "cordate", "-o", "x.png"], "directory"),
     (["PRESET", "cordate"], "shader-model preset"),
+    (["lanceolate", "cordate", "--margin", "--fast"], "drop --fast"),
 ])
 def test_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, args, message):
     args = [str(asset_dir() / "presets" / "ovate.toml") if a == "PRESET" else a for a in args]
@@ -199,6 +200,35 @@ def test_cli_asymmetric_source_writes_both_halves(gl, tmp_path, capsys):
     assert "2 asymmetric frame(s)" in capsys.readouterr().out
 
 
+def test_margin_frames_are_the_landmark_margins_themselves():
+    """--margin / margin=True: each frame is one leaf drawn from its own landmark margin, the
+    asymmetric ones included; its edge is that frame's B-spline (no fit, error 0)."""
+    from leafview.botany.landmarks import outline_sides
+    from leafview.deform.surface import evaluate
+
+    src = load_landmark_leaf(str(asset_dir() / "landmarks" / "asymmetric.toml"))
+    seq = morph_sequence(src, landmark_leaf("cordate"), [], 4, margin=True)
+    assert [len(p) for p in seq.parts] == [1, 1, 1, 1] and seq.errors == [0.0] * 4
+    v = np.linspace(0.0, 1.0, 21)
+    for leaf, (params,) in zip(seq.leaves, seq.parts):
+        right, left = outline_sides(leaf, 21, spacing="parameter")
+        np.testing.assert_allclose(evaluate(params, -np.ones_like(v), v)[:, :2], right, atol=1e-12)
+        np.testing.assert_allclose(evaluate(params, np.ones_like(v), v)[:, :2], left, atol=1e-12)
+
+
+@pytest.mark.gl
+def test_cli_margin_frames(gl, tmp_path, capsys):
+    out = tmp_path / "m"
+    src = str(asset_dir() / "landmarks" / "asymmetric.toml")
+    assert main(["morph", src, "cordate", "--frames", "3", "--margin", "-o", str(out), "--size", "48", "--presets",
+                 "-q"]) == 0
+    assert sorted(p.name for p in out.glob("frame_0*")) == ["frame_0.png", "frame_0.toml"]
+    assert LeafParams.load(out / "frame_0.toml").margin is not None
+    _, meta = read_image(out / "frame_2.png")
+    assert LeafParams.from_dict(json.loads(meta[PARAMS_ATTRIBUTE])).margin is not None
+    assert "drawn from their landmark margins" in capsys.readouterr().out
+
+
 # -- lobed targets and growth with size (Garg & Leow 2011, Figs 12-13) ----------------------------
 
 def _star_preset(path):
@@ -256,6 +286,7 @@ def test_cli_sizes_scale_unilobed_frames(gl, tmp_path):
     (["nosuchshape", "STAR"], "A"),
     (["ovate", "STAR", "--ref", "nosuchshape:2"], "--ref nosuchshape:2"),
     (["ovate", "STAR", "--method", "keyframe"], "keyframe"),
+    (["ovate", "STAR", "--margin"], "drop --margin"),
 ])
 def test_lobed_and_sizes_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, args, message):
     star = _star_preset(tmp_path.parent / f"{tmp_path.name}-star.toml")

@@ -70,6 +70,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="nurbs: eq. 11, frames evenly spaced along the path (default); keyframe: linear "
                         "key-framing through the references (for comparison)")
     p.add_argument("--fast", action="store_true", help="linear fit only (about 10x faster, a few %% off)")
+    p.add_argument("--margin", action="store_true",
+                   help="draw each frame's landmark margin itself: exact, nothing fitted, one leaf a frame")
     p.add_argument("--presets", action="store_true", help="also write each frame's Ω preset (frame_NNN.toml)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
@@ -147,15 +149,20 @@ def run(args: argparse.Namespace) -> int:
     keys, weights = _load_keys(args)
     if sizes is not None:
         key_sizes(sizes, weights, "--sizes")
+    if args.margin and args.fast:
+        raise UsageError("--margin draws the frames without a fit: drop --fast")
     if any(is_lobed(k) for k in keys):
+        if args.margin:
+            raise UsageError("--margin draws landmark margins; a lobed leaf has its own: drop --margin")
         return _run_lobed(args, out, keys, weights, sizes)
     source, target = keys[0], keys[-1]
     refs = list(zip(keys[1:-1], weights))
 
     t0 = time.perf_counter()
-    with progress_bar(total=args.frames, unit="frame", desc="fitting frames", quiet=args.quiet) as bar:
+    with progress_bar(total=args.frames, unit="frame", desc="margins" if args.margin else "fitting frames",
+                      quiet=args.quiet) as bar:
         seq = morph_sequence(source, target, refs, args.frames, method=args.method, polish=not args.fast,
-                             progress=bar.update)
+                             margin=args.margin, progress=bar.update)
     t_fit = time.perf_counter() - t0
     if sizes is not None:
         path = morph_path(source, target, refs) if args.method == "nurbs" else keyframe_path(source, target, refs)
@@ -190,12 +197,16 @@ def run(args: argparse.Namespace) -> int:
 
     s, k = seq.smoothness, seq.keyframe_smoothness
     print(f"wrote {args.frames} frames ({args.size}×{args.size}, {args.view} view), sheet.png and morph.json "
-          f"to {out}/ in {time.perf_counter() - t0:.1f} s (fits {t_fit:.1f} s)")
+          f"to {out}/ in {time.perf_counter() - t0:.1f} s ({'margins' if args.margin else 'fits'} {t_fit:.1f} s)")
     asym = sum(len(p) > 1 for p in seq.parts)
     halves = f"; {asym} asymmetric frame(s) drawn as two one-sided leaves" if asym else ""
-    print(f"leaf space: {len(seq.space_names)} dimensions{halves}; frame fit error: largest "
-          f"{100 * max(seq.errors):.2f} %, median {100 * sorted(seq.errors)[len(seq.errors) // 2]:.2f} % "
-          f"of the leaf length")
+    if args.margin:
+        print(f"leaf space: {len(seq.space_names)} dimensions; frames drawn from their landmark margins "
+              "(no fit, exact)")
+    else:
+        print(f"leaf space: {len(seq.space_names)} dimensions{halves}; frame fit error: largest "
+              f"{100 * max(seq.errors):.2f} %, median {100 * sorted(seq.errors)[len(seq.errors) // 2]:.2f} % "
+              f"of the leaf length")
     print(f"{'smoothness over ' + str(args.frames) + ' frames':34s} {'max step':>9s} {'step max/mean':>14s} "
           f"{'max turn (rad)':>15s}")
     print(f"{'NURBS path (eq. 11, arc length)':34s} {s['max_step']:9.4f} {s['step_ratio']:14.3f} {s['max_turn']:15.3f}")

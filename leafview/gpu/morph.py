@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 from leafview.botany import leaf_surface
 from leafview.botany.asymmetric import ShaderLeaves, shader_leaves
 from leafview.botany.catalogue import load_landmark_leaf
-from leafview.botany.landmarks import LandmarkLeaf
+from leafview.botany.landmarks import LandmarkLeaf, margin_params
 from leafview.botany.morph import keyframe_path, morph_path, smoothness
 from leafview.botany.shapes import INSTANCE_TARGET
 from leafview.core.defaults import DETAIL_GRID
@@ -122,9 +122,10 @@ class MorphSequence:
 
 def morph_sequence(source: LandmarkLeaf, target: LandmarkLeaf,
                    refs: Sequence[tuple[LandmarkLeaf, float]] = (), frames: int = 24, *,
-                   method: str = "nurbs", polish: bool = True,
+                   method: str = "nurbs", polish: bool = True, margin: bool = False,
                    progress: Callable[[int], None] | None = None) -> MorphSequence:
-    """Frames of the morph from ``source`` to ``target`` through weighted references, fitted to Ω.
+    """Frames of the morph from ``source`` to ``target`` through weighted references, fitted to Ω
+    (or, with ``margin=True``, drawn with their own landmark margins: no fit).
 
     Parameters
     ----------
@@ -135,6 +136,9 @@ def morph_sequence(source: LandmarkLeaf, target: LandmarkLeaf,
     polish
         Least-squares polish of each frame's fit (about 0.25 s a frame; off: about 0.03 s, within
         a few per cent of the leaf length).
+    margin
+        Give each frame its landmark margin as its silhouette (:mod:`leafview.core.margin`): one
+        leaf a frame, asymmetric or not, exact (error 0) and without a fit; ``polish`` is unused.
     progress
         Called with 1 after each fitted frame (a progress bar's ``update``).
 
@@ -156,6 +160,13 @@ def morph_sequence(source: LandmarkLeaf, target: LandmarkLeaf,
                         space_names=list(path.space.names),
                         reference_distances=[path.distance_to(v) for v in path.vectors[1:-1]])
     width = len(str(frames - 1))
+    if margin:
+        for i, params in enumerate(margin_params(leaves)):
+            seq.parts.append((params.replace(name=f"morph {i:0{width}d} t={t[i]:.3f}"),))
+            seq.errors.append(0.0)
+        if progress is not None:
+            progress(len(leaves))
+        return seq
     for i, leaf in enumerate(leaves):
         fit = fit_frame(leaf, f"morph {i:0{width}d} t={t[i]:.3f}", polish=polish)
         seq.parts.append(fit.parts)
