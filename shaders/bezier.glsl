@@ -54,4 +54,21 @@ vec3 axis_normal(vec3 d) {
     return m / length(m);
 }
 
+// The unit in-plane normal n = normalize((-A'_y, A'_x, 0)) of a curve at t and dn/dt, from A'(t)
+// and A''(t). Where the tangent vanishes (a midrib whose a1 sits on the base, or a2 on the apex)
+// its limit direction, +A'' towards t = 0 and -A'' towards t = 1, stands in, with dn = 0.
+// numpy reference: leafview/core/bezier.py, in_plane_normal.
+void in_plane_normal(vec3 d1, vec3 d2, float t, out vec3 n, out vec3 dn) {
+    vec3 m = vec3(-d1.y, d1.x, 0.0);
+    vec3 dm = vec3(-d2.y, d2.x, 0.0);
+    float ml = length(m);
+    if (ml < 1e-12) {
+        m = (t < 0.5 ? 1.0 : -1.0) * dm;
+        dm = vec3(0.0);
+        ml = length(m);
+    }
+    n = m / ml;
+    dn = (dm - n * dot(n, dm)) / ml;
+}
+
 #endif

@@ -248,11 +248,8 @@ void margin_silhouette(float sigma, float v, vec3 a1, vec3 a2, out vec3 Pv, out 
     vec2 dp = (4.0 / h) * (r * (c1 - c0) + t * (c2 - c1));
     vec3 dA = cubic_dt(LEAF_BASE, a1, a2, LEAF_APEX, p.y);
     vec3 ddA = cubic_dt2(LEAF_BASE, a1, a2, LEAF_APEX, p.y);
-    vec3 mm = vec3(-dA.y, dA.x, 0.0);
-    vec3 dm = vec3(-ddA.y, ddA.x, 0.0);
-    float ml = length(mm);
-    vec3 n = mm / ml;
-    vec3 dn = (dm - n * dot(n, dm)) / ml;
+    vec3 n, dn;
+    in_plane_normal(dA, ddA, p.y, n, dn);
     Pv = cubic(LEAF_BASE, a1, a2, LEAF_APEX, p.y);
     Qv = p.x * n;
     dPv = dA * dp.y;
@@ -360,12 +357,8 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
         vec2 taper = tip_taper(v);
         float tau = taper.x, dtau = taper.y;
 
-        vec3 m = vec3(-dAv.y, dAv.x, 0.0);
-        vec3 a_dd = cubic_dt2(LEAF_BASE, a1, a2, LEAF_APEX, v);
-        vec3 dm = vec3(-a_dd.y, a_dd.x, 0.0);
-        float mlen = length(m);
-        vec3 n = m / mlen;
-        vec3 dn = (dm - n * dot(n, dm)) / mlen;
+        vec3 n, dn;
+        in_plane_normal(dAv, cubic_dt2(LEAF_BASE, a1, a2, LEAF_APEX, v), v, n, dn);
 
         vec3 g = (j * tau) * n;
         vec3 dg = (dj * tau + j * dtau) * n + (j * tau) * dn;

@@ -216,3 +216,36 @@ def test_width_edit_scales_the_margin():
         b = leafview.evaluate(wide, np.full_like(v, u), v)
         np.testing.assert_allclose(b[:, 0], 1.5 * a[:, 0], atol=1e-12)
         np.testing.assert_allclose(b[:, 1], a[:, 1], atol=1e-12)
+
+
+@pytest.mark.gl
+@pytest.mark.parametrize("a1, a2", [((0.0, 0.0, 0.0), (0.0, 2 / 3, 0.0)), ((0.1, 1 / 3, 0.0), (0.0, 1.0, 0.0))],
+                         ids=["a1-on-the-base", "a2-on-the-apex"])
+def test_a_midrib_whose_tangent_vanishes_at_an_end(gl, a1, a2):
+    """a1 on the base (or a2 on the apex) makes the midrib's tangent vanish there; the normal then
+    takes the tangent's limit direction (core.bezier.in_plane_normal), for a margin leaf and for a
+    jittered one alike: finite in numpy, equal on the GPU, and continuous into the blade."""
+    from leafview.core.bezier import in_plane_normal
+    from leafview.core.params import Jitter
+
+    base = LeafParams()
+    shape = dataclasses.replace(base.shape, a1=a1, a2=a2)
+    leaves = [margin_params([landmark_leaf("cordate")], base.replace(shape=shape))[0],
+              base.replace(shape=shape, jitter=Jitter(enabled=True, amplitude=0.05, density=20.0))]
+    uv = leafview.deform.surface.grid_uv(9, 17).astype(np.float64)
+    for p in leaves:
+        ref = leafview.evaluate(p, uv[:, 0], uv[:, 1])
+        nrm = leafview.normals(p, uv[:, 0], uv[:, 1])
+        assert np.isfinite(ref).all() and np.isfinite(nrm).all()
+        pos, gpu_n = gl.capture(p, uv[:, 0], uv[:, 1])
+        assert np.abs(pos - ref).max() <= TOL
+        assert np.isfinite(gpu_n).all()
+    axis = np.asarray(shape.axis_points())
+    d1 = lambda t: 3 * ((1 - t) ** 2 * (axis[1] - axis[0]) + 2 * (1 - t) * t * (axis[2] - axis[1])  # noqa: E731
+                        + t * t * (axis[3] - axis[2]))
+    d2 = lambda t: 6 * ((1 - t) * (axis[2] - 2 * axis[1] + axis[0]) + t * (axis[3] - 2 * axis[2] + axis[1]))  # noqa: E731
+    end = 0.0 if a1 == (0.0, 0.0, 0.0) else 1.0
+    near = abs(end - 1e-6)
+    n_end, _ = in_plane_normal(d1(np.array([[end]])), d2(np.array([[end]])), [end])
+    n_near, _ = in_plane_normal(d1(np.array([[near]])), d2(np.array([[near]])), [near])
+    np.testing.assert_allclose(n_end, n_near, atol=1e-5)

@@ -13,7 +13,7 @@ from math import comb
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["bernstein", "bernstein_matrix", "evaluate_curve", "derivative_points"]
+__all__ = ["bernstein", "bernstein_matrix", "evaluate_curve", "derivative_points", "in_plane_normal"]
 
 
 def bernstein_matrix(n: int) -> NDArray[np.float64]:
@@ -56,3 +56,23 @@ def derivative_points(points: ArrayLike) -> NDArray[np.float64]:
     p = np.asarray(points, dtype=np.float64)
     n = p.shape[-2] - 1
     return n * (p[..., 1:, :] - p[..., :-1, :])
+
+
+def in_plane_normal(d1: ArrayLike, d2: ArrayLike, t: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The unit in-plane normal ``n = normalize((-A'_y, A'_x, 0))`` of a curve (Chaurasia &
+    Beardsley 2017, eq. 2) and ``dn/dt``, (N, 3) each, from ``d1 = A'(t)`` and ``d2 = A''(t)``
+    ((N, 3)). Where the tangent vanishes (a midrib whose a1 sits on the base, or a2 on the apex)
+    its limit direction, +A'' towards t = 0 and -A'' towards t = 1, stands in, with dn = 0. The
+    twin of ``in_plane_normal`` in ``shaders/bezier.glsl``."""
+    a = np.asarray(d1, np.float64)
+    b = np.asarray(d2, np.float64)
+    m = np.stack([-a[:, 1], a[:, 0], np.zeros(len(a))], axis=-1)
+    dm = np.stack([-b[:, 1], b[:, 0], np.zeros(len(b))], axis=-1)
+    flat = (np.linalg.norm(m, axis=-1) < 1e-12)[:, None]
+    if flat.any():
+        sign = np.where(np.asarray(t, np.float64).reshape(-1) < 0.5, 1.0, -1.0)[:, None]
+        m = np.where(flat, sign * dm, m)
+        dm = np.where(flat, 0.0, dm)
+    mlen = np.linalg.norm(m, axis=-1, keepdims=True)
+    n = m / mlen
+    return n, (dm - n * np.sum(n * dm, axis=-1, keepdims=True)) / mlen

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from leafview.core.bezier import bernstein, derivative_points
+from leafview.core.bezier import bernstein, derivative_points, in_plane_normal
 from leafview.core.limits import MAX_GRID
 from leafview.core.margin import margin_frame
 from leafview.core.params import Jitter, LeafParams
@@ -260,11 +260,7 @@ def _add_jitter(params: LeafParams, s: Arr, sigma: Arr, vv: Arr, pa_d: Arr,
 
     d1 = _curve(pa_d, vv)
     d2 = _curve(derivative_points(pa_d), vv)
-    m = np.stack([-d1[:, 1], d1[:, 0], np.zeros_like(vv)], axis=-1)
-    dm = np.stack([-d2[:, 1], d2[:, 0], np.zeros_like(vv)], axis=-1)
-    mlen = np.linalg.norm(m, axis=-1, keepdims=True)
-    n = m / mlen
-    dn = (dm - n * np.sum(n * dm, axis=-1, keepdims=True)) / mlen
+    n, dn = in_plane_normal(d1, d2, vv)
 
     amp = jit.amplitude
     g = (j * tau)[:, None] * n                               # j τ n

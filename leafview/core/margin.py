@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from leafview.core.bezier import in_plane_normal
 from leafview.errors import ParamError
 
 __all__ = ["MarginSide", "Margin", "MAX_GAPS", "SIDE_TEXELS", "MARGIN_TEXELS", "MARGIN_LIMIT",
@@ -237,11 +238,7 @@ def margin_frame(xy: Arr, dxy: Arr, axis: Arr) -> tuple[Arr, Arr, Arr, Arr]:
     a = r**3 * p0 + 3 * r * r * t * p1 + 3 * r * t * t * p2 + t**3 * p3
     da = 3 * (r * r * (p1 - p0) + 2 * r * t * (p2 - p1) + t * t * (p3 - p2))
     dda = 6 * (r * (p2 - 2 * p1 + p0) + t * (p3 - 2 * p2 + p1))
-    m = np.stack([-da[:, 1], da[:, 0], np.zeros_like(y)], axis=-1)
-    dm = np.stack([-dda[:, 1], dda[:, 0], np.zeros_like(y)], axis=-1)
-    mlen = np.linalg.norm(m, axis=-1, keepdims=True)
-    n = m / mlen
-    dn = (dm - n * np.sum(n * dm, axis=-1, keepdims=True)) / mlen
+    n, dn = in_plane_normal(da, dda, y)
     P = a
     Q = x[:, None] * n
     dP = da * dy[:, None]
