@@ -13,7 +13,6 @@ carried into the fitted leaf's vein space through the texture's own map
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -165,19 +164,15 @@ def test_veins_that_follow_no_tree_are_not_invented():
     assert est.report()["status"] == NOT_VISIBLE
 
 
-def test_ridge_detection_is_fast(tree_fits):
-    """At the fit's texture size (512²) the detection takes at most 40 ms (the best of 7 runs,
-    so that other jobs on the machine do not count)."""
+def test_ridge_detection_at_the_texture_size_is_repeatable(tree_fits):
+    """At the fit's texture size (512²) the detection gives the same estimate every time (its
+    speed is a figure of ``leafview bench fit``, the ``veins`` stage, not asserted here)."""
     sp, fit = tree_fits[0]
-    detect_veins(fit.texture, fit.parts)
-    best = min(_seconds(fit) for _ in range(7))
-    assert fit.texture.shape[0] == 512 and best <= 0.040, best
-
-
-def _seconds(fit: ImageFit) -> float:
-    t0 = time.perf_counter()
-    detect_veins(fit.texture, fit.parts)
-    return time.perf_counter() - t0
+    first = detect_veins(fit.texture, fit.parts)
+    again = detect_veins(fit.texture, fit.parts)
+    assert fit.texture.shape[0] == 512 and first.seconds > 0.0
+    assert {k: v for k, v in first.report().items() if k != "seconds"} == \
+        {k: v for k, v in again.report().items() if k != "seconds"}
 
 
 def test_vein_image_and_ridges(tree_fits):

@@ -36,10 +36,16 @@
 * **Base with a petiole.** Walking the petiole's centre line from its free end (cut where it
   leaves the even petiole), then straight on into the blade, the mask's chord across the walk is
   measured; the blade starts where the half-chord first exceeds twice the petiole's half-width.
-  The growth of the chord just past that point is extrapolated back (by
-  :data:`BASE_EXTRAPOLATION` of the way to zero width: all of it), which finds the tip of a
-  wedge-shaped (cuneate) base hidden in the petiole's width; a rounded or cordate base widens at
-  once and stays put.
+  (Where straight on leaves the mask before that, the petiole curves: the walk aims instead at
+  where the whole centre line meets the blade, if that way crosses less than half as much
+  background.) The growth of the chord past that point is
+  extrapolated back (by :data:`BASE_EXTRAPOLATION` of the way to zero width: all of it), which
+  finds the tip of a wedge-shaped (cuneate) base hidden in the petiole's width: the growth just
+  past the point (back at most four petiole half-widths), and the mean growth until the
+  half-chord reaches four times the petiole's half-width (over at most :data:`BASE_RUN` of the
+  extent, back at most :data:`BASE_BACK`: a long narrow wedge), whichever reaches farther. A
+  rounded or cordate base widens at once (more than a petiole half-width within three pixels) and
+  stays put.
 * **Base without a petiole.** The blade's principal axis (through its centroid) meets the
   outline at two ends; on a blade wider than long the midrib runs across that axis, which the
   veins tell (:func:`_vein_sense` clear across it and :data:`VEIN_TURN` times clearer than
@@ -51,14 +57,18 @@
   widest below the middle), with a warning.
   The base itself is the notch's sinus; else the outline point farthest from the apex, unless that
   lies more than :data:`SHOULDER` of the width off the axis (a shoulder of a truncate base), where
-  the axis' crossing is used. A nearly round blade (principal axes within 15 %) gets a warning:
+  the axis' crossing is used; a pointed base is followed on along its taper as the apex is
+  (:func:`_taper_tip`). A nearly round blade (principal axes within 15 %) gets a warning:
   its axis, so its ends, are a guess.
 * **Apex** (:func:`_midrib_end`): the midrib's end, seen from the base along the line through the
   blade's centroid (the principal axis misleads on a blade wider than long). Where that line
   leaves the outline in a notch (an emarginate or two-lobed apex) it is the notch's sinus; else
   the outline point farthest from the base within 45° of the line, or, on a blunt apex (many
   points nearly as far, spread across the line), the one of those nearest the line (:func:`_apex`;
-  the base opposite an apex is found the same way).
+  the base opposite an apex is found the same way). A thin tip loses its last pixels in the
+  segmentation (the blurred threshold drops parts a few pixels wide), so the tip's width profile
+  behind that point, where it is wide enough to trust, is extended as a straight line to zero
+  width (:func:`_taper_tip`); a blunt apex widens too fast to be moved.
 * **Outline** (:func:`fit_closed_bspline`).
 """
 
@@ -101,6 +111,13 @@ PETIOLE_MIN_LENGTH = 0.04     # petiole length / extent of the leaf, at least
 PETIOLE_MIN_RADIUS = 1.0      # px: a thinner strand is an apex tip or noise
 PETIOLE_EVENNESS = 0.7        # width of the free third / width of the middle third, at least
 BASE_EXTRAPOLATION = 1.0      # of the distance back to zero width at the blade's first slope
+BASE_RUN = 0.1               # the mean growth is read from twice to four times the petiole's half-width, over at most this of the extent
+BASE_BACK = 0.25             # the extrapolation reaches back at most this of the extent
+TIP_REACH = 0.06             # the tip's width is read this far (of the length) behind the apex
+TIP_BLUR = 3.0               # working pixels: narrower parts of the tip are not measured
+TIP_SLOPE = 0.8              # a tip widening faster than this (width per length) is blunt: it stays
+TIP_MIN_SLOPE = 0.15         # ... and one widening slower is a stalk (a short petiole, a drip tip): it stays too
+TIP_MAX = 0.04               # the tip moves on at most this (of the length)
 VEIN_SENSE = 0.03             # |vein sense| from which the veins tell the apex's end
 VEIN_TURN = 2.0               # the veins' sense across the principal axis / along it, from which the midrib runs across
 SHOULDER = 1 / 3              # farthest point off the axis by this much of the width: a truncate base
@@ -443,6 +460,24 @@ def _extend_free_end(mask: NDArray[np.bool_], path: Array) -> Array:
     return path if run == 0 else np.vstack([steps[run - 1], path])
 
 
+def _first_wide(half: Array, begin: int, rho: float) -> int | None:
+    """The first index from ``begin`` where the half-chord exceeds twice the petiole's half-width
+    and stays above it for the next few pixels (not one noisy sample), or None."""
+    over = half[begin:] > 2 * rho + 0.5
+    n = max(3, int(round(rho)))
+    if len(over) < n:
+        return None
+    held = np.nonzero(np.convolve(over, np.ones(n), "valid") >= n)[0]
+    return begin + int(held[0]) if len(held) else None
+
+
+def _gap(half: Array, begin: int, rho: float) -> int:
+    """How many steps of the walk from index ``begin`` lie outside the mask before the blade
+    widens it past twice the petiole's half-width."""
+    wide = _first_wide(half, begin, rho)
+    return int(np.count_nonzero(half[begin:len(half) if wide is None else wide] == 0))
+
+
 def _petiole_base(mask: NDArray[np.bool_], pet: _Petiole, extent: float,
                   base: Array | None) -> tuple[Array, Array, Array]:
     """(base, petiole polyline from its free end to the base, unit direction into the blade)."""
@@ -456,14 +491,28 @@ def _petiole_base(mask: NDArray[np.bool_], pet: _Petiole, extent: float,
     pts, tan = _walk(path, direction, 0.4 * extent)
     if base is None:
         half = _half_chords(mask, pts, np.stack([-tan[:, 1], tan[:, 0]], axis=1), 8 * rho + 4)
+        joint = pet.path[-1] - path[-1]            # where the whole centre line meets the blade
+        gap = _gap(half, len(path), rho)
+        if gap > 0 and float(np.hypot(*joint)) > 2 * rho:
+            # a curved petiole: straight on along its last tangent leaves the mask, so aim at the
+            # joint instead, where that way lies outside the mask for less than half as long
+            pts2, tan2 = _walk(path, joint / float(np.hypot(*joint)), 0.4 * extent)
+            half2 = _half_chords(mask, pts2, np.stack([-tan2[:, 1], tan2[:, 0]], axis=1), 8 * rho + 4)
+            if 2 * _gap(half2, len(path), rho) < gap:
+                pts, tan, half = pts2, tan2, half2
         start = int(np.hypot(*np.diff(path, axis=0).T).sum()) // 3     # not at the free end
-        above = np.nonzero(half[start:] > 2 * rho + 0.5)[0]
-        i = start + int(above[0]) if len(above) else len(path) - 1
-        run = half[i:i + int(3 * rho) + 3]
-        slope = float(np.polyfit(np.arange(len(run)), run, 1)[0]) if len(run) >= 3 else 0.0
-        if i > 0:                                  # a jump (rounded or cordate base) is not extrapolated
-            slope = max(slope, half[i] - half[i - 1], (half[min(i + 1, len(half) - 1)] - half[i - 1]) / 2)
-        back_px = min(BASE_EXTRAPOLATION * half[i] / slope, 4 * rho + 2) if slope > 0 else 0.0
+        wide_at = _first_wide(half, start, rho)
+        i = wide_at if wide_at is not None else len(path) - 1
+        wide = np.nonzero(half[i:] > 4 * rho + 1)[0]
+        end = i + min(max(int(wide[0]) + 1 if len(wide) else len(half), 3), int(BASE_RUN * extent) + 1)
+        back_px = 0.0
+        for run, cap in ((half[i:i + int(3 * rho) + 3], 4 * rho + 2), (half[i:end], BASE_BACK * extent)):
+            slope = float(np.polyfit(np.arange(len(run)), run, 1)[0]) if len(run) >= 3 else 0.0
+            if i > 0 and (cap < 4 * rho + 3 or half[i] - half[max(i - 3, 0)] > rho):
+                # a jump (rounded or cordate base) is not extrapolated
+                slope = max(slope, half[i] - half[i - 1], (half[min(i + 1, len(half) - 1)] - half[i - 1]) / 2)
+            if slope > 0:
+                back_px = max(back_px, min(BASE_EXTRAPOLATION * half[i] / slope, cap))
         k = max(0, i - int(round(back_px)))
     else:
         k = int(np.argmin(np.hypot(*(pts - base).T)))
@@ -585,7 +634,7 @@ def _base_without_petiole(contour: Array, centre: Array, axis: Array, apex: Arra
     widest = max(_width_at(s, lat, x, step) for x in np.linspace(s.min(), s.max(), 21)[1:-1])
     if abs(float((far - centre) @ np.array([-axis[1], axis[0]]))) > SHOULDER * widest:
         return ends[b], note                          # that is a shoulder of a truncate base: its middle
-    return far, note
+    return _taper_tip(contour, tip, far, step), note  # a wedge's point thinner than the segmentation resolves
 
 
 def _apex(contour: Array, base: Array, axis: Array, cone_deg: float = 45.0) -> Array:
@@ -603,18 +652,68 @@ def _apex(contour: Array, base: Array, axis: Array, cone_deg: float = 45.0) -> A
     return contour[int(np.argmax(np.where(cone, dist, -1.0)))].copy()
 
 
-def _midrib_end(contour: Array, base: Array, centre: Array) -> Array:
+def _side_profile(s: Array, lat: Array, start: int, step: int, reach: float, t: Array) -> Array:
+    """The lateral offset at distances ``t`` behind the apex of one side of the contour, walked
+    from index ``start`` in direction ``step`` until it lies ``reach`` behind the apex."""
+    order = np.roll(np.arange(len(s)), -start)[::step] if step > 0 else np.roll(np.arange(len(s))[::-1], start + 1)
+    back = -s[order]
+    stop = int(np.argmax(back > reach)) if (back > reach).any() else len(back)
+    back, side = np.maximum.accumulate(back[:max(stop + 1, 2)]), lat[order][:max(stop + 1, 2)]
+    return np.interp(t, back, side)
+
+
+def _taper_tip(contour: Array, base: Array, apex: Array, f: float) -> Array:
+    """The apex moved on to where the tip's sides meet, when the tip tapers to a point narrower
+    than the segmentation resolves (a thin acuminate tip's last pixels are lighter than the
+    threshold). The width of the blade across its midline is read over :data:`TIP_REACH` of the
+    length behind the apex, where it is at least :data:`TIP_BLUR` working pixels (narrower parts
+    are thinned by the blur); a straight line fitted to it (and one to the midline, which turns
+    the frame to the tip's own direction) is followed to zero width. A blunt or rounded apex
+    widens faster than :data:`TIP_SLOPE`, a stalk (a petiole too short to be found as one, a drip
+    tip) slower than :data:`TIP_MIN_SLOPE`: both stay. The move is at most :data:`TIP_MAX` of the
+    length."""
+    length = float(np.hypot(*(apex - base)))
+    if length <= 0:
+        return apex
+    d = (apex - base) / length
+    reach = TIP_REACH * length
+    i0 = int(np.argmin(np.hypot(*(contour - apex).T)))
+    t = np.arange(0.0, reach, 0.5)
+    tip = apex
+    for _ in range(2):
+        s, lat = _frame(contour, apex, d)
+        a, b = _side_profile(s, lat, i0, 1, reach, t), _side_profile(s, lat, i0, -1, reach, t)
+        width, mid = np.abs(a - b), 0.5 * (a + b)
+        use = width >= TIP_BLUR * f
+        if use.sum() < 5:
+            return apex
+        slope, icpt = np.polyfit(t[use], width[use], 1)
+        turn, offset = np.polyfit(t[use], mid[use], 1)
+        if slope <= 0:
+            return apex
+        t0 = -icpt / slope                          # where the width reaches zero (negative: beyond the apex)
+        normal = np.array([-d[1], d[0]])
+        reached = max(t0, -TIP_MAX * length)
+        tip = apex - reached * d + (offset + turn * reached) * normal
+        d = d - turn * normal                       # the tip's own direction, for the second pass
+        d /= max(float(np.hypot(*d)), 1e-9)
+    if t0 >= 0 or not TIP_MIN_SLOPE < slope < TIP_SLOPE:
+        return apex
+    return np.asarray(tip, np.float64)
+
+
+def _midrib_end(contour: Array, base: Array, centre: Array) -> tuple[Array, bool]:
     """The apex seen from ``base``: the contour point farthest from it within 45° of the line from
     it through the blade's centroid, unless that line's far crossing of the contour lies in a notch
     (deeper than :data:`NOTCH_DEPTH` of the length inside the convex hull: an emarginate or
-    two-lobed apex), where the notch's sinus is the midrib's end."""
+    two-lobed apex), where the notch's sinus is the midrib's end (and True: notched)."""
     away = centre - base
     away = away / max(float(np.hypot(*away)), 1e-9)
     s, lat = _frame(contour, base, away)
     end, depth = _end_point(contour, s, lat, False, ConvexHull(contour).equations)
     if depth > NOTCH_DEPTH * float(s.max() - s.min()):
-        return end
-    return _apex(contour, base, away)
+        return end, True
+    return _apex(contour, base, away), False
 
 
 # -- the whole -------------------------------------------------------------------------------------------------
@@ -681,7 +780,9 @@ def leaf_shape(mask: NDArray[np.bool_], *, fine: NDArray[np.bool_] | None = None
         if note:
             warnings.append(note)
     if apex is None:
-        apex = _midrib_end(contour, base, centre)
+        apex, notched = _midrib_end(contour, base, centre)
+        if not notched:
+            apex = _taper_tip(contour, base, apex, float(f))
     length = max(float(np.hypot(*(apex - base))), 1.0)
     controls, hausdorff = fit_closed_bspline(contour, max(0.5 * f, OUTLINE_TOLERANCE * length), 0.5 * f)
     if hausdorff > max(0.75 * f, OUTLINE_WARN * length):
