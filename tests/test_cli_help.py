@@ -95,3 +95,12 @@ def test_unknown_command_exits_2(capsys):
         main(["rendr", "ovate"])
     assert info.value.code == 2
     assert "invalid choice: 'rendr'" in capsys.readouterr().err
+
+
+def test_scene_command_does_not_load_the_photo_fit():
+    """``leafview scene`` imports the scene viewer (for ``--view``), whose photo reference loads
+    the photo fit (scipy, scikit-image: about a second) only when a photo is opened."""
+    code = "import sys, leafview.cli.scene; print(sorted(m for m in ('leafview.fit', 'skimage') if m in sys.modules))"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert result.stdout.strip() == "[]", result.stdout

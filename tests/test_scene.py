@@ -242,6 +242,22 @@ def test_lod_picks_coarser_grids_further_away(ctx, drawn, small):
     assert meds == sorted(meds)
 
 
+def test_leaves_of_a_few_pixels_take_the_coarsest_level(ctx, drawn, small):
+    """A small image makes the leaves a few pixels long: the culling pass puts some on the 2×3
+    grid (4 triangles), exactly where the numpy reference does."""
+    from leafview.gpu.scene import LOD_GRIDS, CullSettings, cull_reference
+    from leafview.scene.camera import scene_camera
+
+    assert LOD_GRIDS[-1] == (2, 3) and drawn.grids[-1] == (2, 3)
+    size = (96, 54)
+    cam = scene_camera(small, size, "three-quarter")
+    drawn.set_camera(cam, size)
+    drawn.draw(CullSettings())
+    got = drawn.levels()
+    assert np.array_equal(got, cull_reference(small, drawn.cull_rows, cam, size, CullSettings()))
+    assert (got == len(LOD_GRIDS) - 1).sum() > 0
+
+
 def test_lod_switch_moves_the_outline_by_at_most_a_pixel(ctx):
     from leafview.gpu.scene import lod_switch_error
 

@@ -26,11 +26,12 @@ Every failure (an unreadable file, an image without a leaf, a fit that fails) be
 
 from __future__ import annotations
 
+import importlib
 import math
 from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import moderngl
 import numpy as np
@@ -38,10 +39,18 @@ from numpy.typing import ArrayLike, NDArray
 
 from leafview.app.state import ReferencePhoto, ViewerState
 from leafview.core.params import LeafParams, ParamError
-from leafview.fit.photo import canonical_frame, fit_image
-from leafview.fit.photo_outline import leaf_outline, read_photo
 from leafview.gpu.layout import ATLAS_UNIT
 from leafview.gpu.shaders import build_program
+
+if TYPE_CHECKING:
+    from types import ModuleType
+
+
+def _fit(module: str) -> ModuleType:
+    """``leafview.fit.<module>``, loaded when a photo is first opened or fitted: the photo fit
+    pulls in scipy and scikit-image (about a second), which a viewer or a ``leafview scene`` run
+    without photos never needs."""
+    return importlib.import_module(f"leafview.fit.{module}")
 
 __all__ = ["PHOTO_SUFFIXES", "MAX_DISPLAY_SIDE", "MARKERS", "is_photo_path", "display_image",
            "world_from_pixel", "pixel_of_world", "marker_world", "plane_normal", "open_photo", "close_photo",
@@ -134,9 +143,10 @@ def open_photo(state: ViewerState, path: str | Path) -> bool:
     the current leaf (which is kept). On any error ``state.error`` says why and nothing changes."""
     p = Path(path).expanduser()
     try:
-        photo = read_photo(p)
-        outline = leaf_outline(photo)
-        placement = canonical_frame(outline.base, outline.apex)
+        outlines = _fit("photo_outline")
+        photo = outlines.read_photo(p)
+        outline = outlines.leaf_outline(photo)
+        placement = _fit("photo").canonical_frame(outline.base, outline.apex)
     except (ParamError, ValueError) as exc:
         state.error = f"reference photo: {exc}"
         return False
@@ -182,7 +192,7 @@ def fit_reference(state: ViewerState) -> bool:
         state.error = "Fit: open a photo first (Open… accepts PNG, JPEG and TIFF)"
         return False
     try:  # one symmetric leaf (the viewer edits one); the texture is not shown here, so keep it small
-        fit = fit_image(ref.path, base=ref.base_px, apex=ref.apex_px, name=state.params.name or ref.path.stem,
+        fit = _fit("photo").fit_image(ref.path, base=ref.base_px, apex=ref.apex_px, name=state.params.name or ref.path.stem,
                         texture_size=FIT_TEXTURE_SIZE, halves=False)
     except (ParamError, ValueError) as exc:
         state.error = f"Fit: {exc}"

@@ -105,7 +105,15 @@ from leafview.scene.variety import interpolate_bend, load_table, sphere_padding
 __all__ = ["LOD_GRIDS", "CullSettings", "SceneRenderer", "SceneLimitError", "pack_scene", "species_cull", "plan_batches",
            "frustum_planes", "cull_reference", "lobed_levels", "lobed_species", "LOD_NEVER"]
 
-LOD_GRIDS: tuple[tuple[int, int], ...] = ((9, 17), (5, 9), (3, 5))  # 256, 64, 16 triangles
+LOD_GRIDS: tuple[tuple[int, int], ...] = ((9, 17), (5, 9), (3, 5), (2, 3))  # 256, 64, 16, 4 triangles
+"""The levels of detail, finest first. The last, (2, 3), is a leaf of a few pixels drawn through
+its margin at the base, the widest row and the tip: four triangles and six vertices. Its outline
+error is about three times the (3, 5) level's, so the culling pass picks it (by the same
+outline-error rule as the others, 0.75 px by default) for leaves shorter than about 3-5 pixels. A
+10⁶-leaf field at 1280×720 is drawn almost wholly on it, and on llvmpipe its leaves' pass with 4×
+multisampling then takes less than half the time: that pass's cost is in the fragment stage
+(3.5× the single-sample pass; 2× samples cost as much as 4×), where each sub-pixel triangle that
+covers a sample is shaded (docs/benchmarks.md, "10⁶ leaves")."""
 STEM_FRONT = (0.30, 0.22, 0.14, 0.0)
 STEM_BACK = (0.30, 0.22, 0.14)
 _LOCAL = 64
