@@ -432,6 +432,30 @@ def _arclength_parameters(margins: MarginPieces, n: int) -> NDArray[np.float64]:
     return u
 
 
+def _side_groups(leaves: Sequence[LandmarkLeaf]) -> tuple[NDArray[np.int64], list[tuple[list[int], MarginPieces]]]:
+    """The distinct sides of ``leaves`` (a symmetric leaf's two sides are one object, built once):
+    ``rows`` (B, 2), each leaf's right and left side index, and per landmark count the side
+    indices and their margins, built together in closed form (:func:`margin_pieces`)."""
+    sides: list[SideLandmarks] = []
+    index: dict[int, int] = {}                  # id of a side -> its row
+    rows = np.empty((len(leaves), 2), dtype=np.int64)
+    for k, leaf in enumerate(leaves):
+        if not isinstance(leaf, LandmarkLeaf):
+            raise ParamError(f"leaves[{k}]", f"expected a LandmarkLeaf, got {type(leaf).__name__}")
+        for j, side in enumerate((leaf.right, leaf.left)):
+            row = index.get(id(side))
+            if row is None:
+                row = index[id(side)] = len(sides)
+                sides.append(side)
+            rows[k, j] = row
+    marks = [side.landmarks() for side in sides]
+    by_count: dict[int, list[int]] = {}
+    for i, (pts, _) in enumerate(marks):
+        by_count.setdefault(len(pts), []).append(i)
+    return rows, [(group, margin_pieces(np.stack([marks[i][0] for i in group]), np.stack([marks[i][1] for i in group])))
+                  for group in by_count.values()]
+
+
 def outlines_sides(leaves: Sequence[LandmarkLeaf], n: int = 128, *, spacing: str = "arclength"
                    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """:func:`outline_sides` of many leaves at once: ``(right, left)``, each (B, n, 2).
@@ -444,25 +468,9 @@ def outlines_sides(leaves: Sequence[LandmarkLeaf], n: int = 128, *, spacing: str
         raise ValueError(f"n must be >= 2, got {n}")
     if spacing not in ("arclength", "parameter"):
         raise ValueError(f"spacing must be 'arclength' or 'parameter', not {spacing!r}")
-    sides: list[SideLandmarks] = []
-    index: dict[int, int] = {}                  # id of a side -> its row (a symmetric leaf's sides are one object)
-    rows = np.empty((len(leaves), 2), dtype=np.int64)
-    for k, leaf in enumerate(leaves):
-        if not isinstance(leaf, LandmarkLeaf):
-            raise ParamError(f"leaves[{k}]", f"expected a LandmarkLeaf, got {type(leaf).__name__}")
-        for j, side in enumerate((leaf.right, leaf.left)):
-            row = index.get(id(side))
-            if row is None:
-                row = index[id(side)] = len(sides)
-                sides.append(side)
-            rows[k, j] = row
-    marks = [side.landmarks() for side in sides]
-    out = np.empty((len(sides), n, 2))
-    by_count: dict[int, list[int]] = {}
-    for i, (pts, _) in enumerate(marks):
-        by_count.setdefault(len(pts), []).append(i)
-    for group in by_count.values():
-        margins = margin_pieces(np.stack([marks[i][0] for i in group]), np.stack([marks[i][1] for i in group]))
+    rows, groups = _side_groups(leaves)
+    out = np.empty((int(rows.max(initial=-1)) + 1, n, 2))
+    for group, margins in groups:
         u = _arclength_parameters(margins, n) if spacing == "arclength" else np.linspace(0.0, 1.0, n)
         out[group] = margins(u)
     out[:, 0], out[:, -1] = (0.0, 0.0), (0.0, 1.0)
@@ -534,25 +542,9 @@ def margins(leaves: Sequence[LandmarkLeaf]) -> list[Margin]:
     """The margins of eqs 2-6 of many leaves, as the shader draws them (no Ω fit): sides with the
     same number of landmarks are built together in closed form
     (:func:`~leafview.botany.hermite.margin_pieces`)."""
-    sides: list[SideLandmarks] = []
-    index: dict[int, int] = {}
-    rows = np.empty((len(leaves), 2), dtype=np.int64)
-    for k, leaf in enumerate(leaves):
-        if not isinstance(leaf, LandmarkLeaf):
-            raise ParamError(f"leaves[{k}]", f"expected a LandmarkLeaf, got {type(leaf).__name__}")
-        for j, side in enumerate((leaf.right, leaf.left)):
-            row = index.get(id(side))
-            if row is None:
-                row = index[id(side)] = len(sides)
-                sides.append(side)
-            rows[k, j] = row
-    marks = [side.landmarks() for side in sides]
-    built: list[MarginSide | None] = [None] * len(sides)
-    by_count: dict[int, list[int]] = {}
-    for i, (pts, _) in enumerate(marks):
-        by_count.setdefault(len(pts), []).append(i)
-    for group in by_count.values():
-        mp = margin_pieces(np.stack([marks[i][0] for i in group]), np.stack([marks[i][1] for i in group]))
+    rows, groups = _side_groups(leaves)
+    built: list[MarginSide | None] = [None] * (int(rows.max(initial=-1)) + 1)
+    for group, mp in groups:
         for j, i in enumerate(group):
             built[i] = _side_margin(mp.breaks[j], mp.pieces[j])
     out = []
