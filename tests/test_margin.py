@@ -249,3 +249,29 @@ def test_a_midrib_whose_tangent_vanishes_at_an_end(gl, a1, a2):
     n_end, _ = in_plane_normal(d1(np.array([[end]])), d2(np.array([[end]])), [end])
     n_near, _ = in_plane_normal(d1(np.array([[near]])), d2(np.array([[near]])), [near])
     np.testing.assert_allclose(n_end, n_near, atol=1e-5)
+
+
+@pytest.mark.gl
+def test_landmark_files_load_as_margin_leaves(gl, tmp_path, capsys):
+    """A landmark leaf file (``landmarks = 1``) renders and exports wherever a leaf file does,
+    drawn with its own margin; a bad one is refused naming the file and the field."""
+    from leafview.botany.catalogue import load_landmark_leaf
+    from leafview.cli import main
+    from leafview.core.io import load_leaves
+    from leafview.export.images import PARAMS_ATTRIBUTE, read_image
+    from leafview.resources import asset_dir
+
+    src = asset_dir() / "landmarks" / "broad-cordate.toml"
+    (leaf,) = load_leaves(src)
+    assert leaf.name == "broad-cordate" and leaf.margin == margins([load_landmark_leaf(str(src))])[0]
+    out = tmp_path / "bc.png"
+    assert main(["render", str(src), "-o", str(out), "--size", "48"]) == 0
+    _, meta = read_image(out)
+    assert LeafParams.from_dict(json.loads(meta[PARAMS_ATTRIBUTE])).margin == leaf.margin
+    bad = tmp_path / "bad.toml"
+    bad.write_text('landmarks = 1\nname = "x"\n[right]\nwaist = [0.4, 0.5]\n', encoding="utf-8")
+    capsys.readouterr()
+    assert main(["render", str(bad), "-o", str(tmp_path / "bad.png")]) == 2
+    err = capsys.readouterr().err
+    assert "bad.toml" in err and "right." in err, err
+    assert not (tmp_path / "bad.png").exists()

@@ -9,6 +9,8 @@ Compound leaf files (``lobed = 1``, ``assets/compound/*.toml``) load wherever a 
 this module registers a reader with :mod:`leafview.core.io` that hands them to
 :func:`leafview.botany.lobe_outline.compound_document`, loaded on the first such file (it brings
 scipy.optimize and shapely: half a second that every command would otherwise pay at start).
+Landmark leaf files (``landmarks = 1``, ``assets/landmarks/*.toml``) load the same way, as leaves
+drawn with their own landmark margin (:func:`leafview.botany.landmarks.margin_params`).
 """
 
 from __future__ import annotations
@@ -219,6 +221,19 @@ def _compound_document(data: Any) -> LeafParams | None:
 
 
 register_document_reader(_compound_document)
+
+
+def _landmark_document(data: Any) -> LeafParams | None:
+    """A landmark leaf file (``landmarks = 1``, ``assets/landmarks/*.toml``; Garg & Leow 2011,
+    eq. 1) as a leaf drawn with its own margin (:mod:`leafview.core.margin`), None for any other."""
+    if not (isinstance(data, Mapping) and "landmarks" in data):
+        return None
+    landmarks = importlib.import_module("leafview.botany.landmarks")
+    leaf: LeafParams = landmarks.margin_params([landmarks.LandmarkLeaf.from_dict(data)])[0]
+    return leaf
+
+
+register_document_reader(_landmark_document)
 
 
 # -- outputs ------------------------------------------------------------------------------------
