@@ -150,6 +150,26 @@ def test_controller_changes_only_the_shape_and_hits_the_ends(state):
         c.choose(target="nosuchshape")
 
 
+def test_controller_exact_margins_draw_each_frame_without_a_fit(state):
+    """*exact margins*: the frame's landmark margin is the leaf's silhouette (no fit), the same
+    whether dragging or not; switching it off goes back to the fitted shape."""
+    from leafview.app.morph_panel import MorphController
+    from leafview.botany.landmarks import margins
+    from leafview.gpu.morph import fit_frame
+
+    before = state.params
+    c = MorphController(state, source="lanceolate", target="cordate")
+    assert c.choose(exact=True)
+    assert c.set_t(0.5, dragging=True)
+    path = morph_path(landmark_leaf("lanceolate"), landmark_leaf("cordate"), [])
+    assert state.params.margin == margins([path.sample(0.5)])[0] and c.last_error == 0.0
+    assert state.params.material == before.material and not state.params.shape.extended
+    c.end_drag()
+    assert state.params.margin == margins([path.sample(0.5)])[0]
+    c.choose(exact=False)
+    assert state.params.margin is None and state.params.shape == fit_frame(path.sample(0.5)).parts[0].shape
+
+
 def test_panel_t_slider_drag_is_one_undo_step(state):
     from leafview.app.morph_panel import MorphPanel
     from tests.test_viewer_panel import UI

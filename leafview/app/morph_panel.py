@@ -6,7 +6,9 @@ its own): the path's frame at ``t`` (evenly spaced along the path's arc length) 
 shader model and replaces only the leaf's ``shape``, so colours, ripples and bending stay as the
 user set them. While the slider is dragged the fast linear fit is used (tens of ms); on release the
 polished fit (the catalogue's accuracy, under 1 % of the leaf length) replaces it in the same undo
-step. :class:`MorphPanel` draws the widgets.
+step. With *exact margins* the frame's landmark margin itself becomes the leaf's silhouette
+(:mod:`leafview.core.margin`): nothing is fitted, dragging and release give the same leaf.
+:class:`MorphPanel` draws the widgets.
 
 The target may also be a lobed preset (maple, oak, bilobed: Garg & Leow 2011, Fig. 13): the frame
 is then the margin-space morph of :mod:`leafview.botany.lobe_morph` and replaces the leaf's
@@ -24,9 +26,11 @@ from imgui_bundle import imgui
 
 from leafview.app.state import ViewerState
 from leafview.botany.catalogue import catalogue_names
+from leafview.botany.landmarks import margins
 from leafview.botany.lobe_morph import is_lobed, load_key_shape, lobe_morph_path
 from leafview.botany.morph import key_sizes, morph_path
 from leafview.core.lobes import Lobes
+from leafview.core.margin import Margin
 from leafview.core.params import LeafParams, ParamError, Shape
 from leafview.gpu.morph import fit_frame
 from leafview.resources import builtin_presets
@@ -90,6 +94,18 @@ def _fit(source: str, target: str, ref: str, weight: float, t: float, polish: bo
     return fit.parts[0].shape, fit.error   # catalogue shapes and their morphs are symmetric: one leaf
 
 
+@lru_cache(maxsize=256)
+def _margin(source: str, target: str, ref: str, weight: float, t: float) -> Margin:
+
+    return margins([_path(source, target, ref, weight).sample(t)])[0]
+
+
+def _quartic(shape: Shape) -> Shape:
+    """``shape`` itself, or the paper's quartic with its midrib when it is extended (a leaf drawn
+    with a landmark margin takes its heights from three rows)."""
+    return replace(Shape(), a1=shape.a1, a2=shape.a2) if shape.extended else shape
+
+
 @dataclass
 class MorphController:
     """Source, target, reference (name and weight) and the position ``t`` on the morph path."""
@@ -101,6 +117,7 @@ class MorphController:
     weight: float = 1.0
     t: float = 0.0
     grow: bool = False
+    exact: bool = False     # draw each frame's landmark margin itself (leafview.core.margin): no fit
     last_error: float | None = field(default=None, init=False)
     _lobes_set: bool = field(default=False, init=False, repr=False)
 
@@ -151,12 +168,19 @@ class MorphController:
             lobes = self.lobes_at(self.t)
 
             def edit(p: LeafParams) -> LeafParams:
-                return p.replace(lobes=lobes)
+                return p.replace(lobes=lobes, margin=None)
+        elif self.exact:
+            t = min(1.0, max(0.0, round(float(self.t), 3)))
+            margin = _margin(self.source, self.target, self.reference, float(self.weight), t)
+            self.last_error = 0.0
+
+            def edit(p: LeafParams) -> LeafParams:
+                return p.replace(shape=_quartic(p.shape), margin=margin, lobes=Lobes() if self._lobes_set else p.lobes)
         else:
             shape = self.shape_at(self.t, polish=not dragging)
 
             def edit(p: LeafParams) -> LeafParams:   # back from a lobed target: unlobed again
-                return p.replace(shape=shape, lobes=Lobes() if self._lobes_set else p.lobes)
+                return p.replace(shape=shape, margin=None, lobes=Lobes() if self._lobes_set else p.lobes)
 
         def apply(p: LeafParams) -> LeafParams:
             q = edit(p)
@@ -179,7 +203,7 @@ class MorphController:
                 raise ValueError(f"{key}: unknown catalogue shape {value!r}")
             if key == "target" and value not in self.targets():
                 raise ValueError(f"{key}: unknown catalogue shape or lobed preset {value!r}")
-            if key == "grow":
+            if key in ("grow", "exact"):
                 value = bool(value)
             if key == "reference" and value != NO_REFERENCE and value not in _names():
                 raise ValueError(f"reference: unknown catalogue shape {value!r}")
@@ -235,11 +259,18 @@ class MorphPanel:
         self._record("morph.grow")
         if changed:
             c.choose(grow=grow)
+        if not c.lobed:
+            changed, exact = imgui.checkbox("exact margins (no fit)##morph-exact", c.exact)
+            self._record("morph.exact")
+            if changed:
+                c.choose(exact=exact)
         changed, t = imgui.slider_float("t##morph-t", float(c.t), 0.0, 1.0, "%.3f")
         self._record("morph.t")
         if changed:
             c.set_t(t, dragging=imgui.is_item_active())
         if imgui.is_item_deactivated():
             c.end_drag()
-        if c.last_error is not None:
+        if c.exact and not c.lobed:
+            imgui.text_disabled("each frame drawn from its landmark margin: exact, nothing fitted")
+        elif c.last_error is not None:
             imgui.text_disabled(f"fit error {100 * c.last_error:.2f} % of the leaf length")
