@@ -38,7 +38,7 @@ from leafview.bench.timing import Progress, bench_context, gl_info, median_time
 from leafview.core.params import Bending, LeafParams
 from leafview.gpu.context import check_error
 from leafview.gpu.instanced import OffscreenTarget
-from leafview.gpu.scene import CullSettings, SceneRenderer, lod_switch_error
+from leafview.gpu.scene import LOD_GRIDS, CullSettings, SceneRenderer, lod_switch_error
 from leafview.resources import resolve_preset
 from leafview.scene.camera import scene_camera
 from leafview.scene.spec import SceneSpec, build_scene, scene_from_leaves
@@ -191,7 +191,8 @@ def format_table(res: dict[str, Any]) -> str:
     """The readable report printed by ``leafview bench scene``."""
     lines = [f"leafview scene benchmark{' (quick)' if res['quick'] else ''}: {res['gl_renderer']} "
              f"({res['gl_version']}), {res['size'][0]}×{res['size'][1]}, species {', '.join(res['species'])}"]
-    lines.append(f"{'leaves':>9}  {'camera':<13} {'ms/frame':>9} {'leaves/s':>12} {'drawn':>9}  levels (9×17/5×9/3×5)")
+    grids = "/".join(f"{nu}×{nv}" for nu, nv in LOD_GRIDS)
+    lines.append(f"{'leaves':>9}  {'camera':<13} {'ms/frame':>9} {'leaves/s':>12} {'drawn':>9}  levels ({grids})")
     for n, row in res["frames"].items():
         for view, r in row.items():
             lines.append(f"{int(n):>9,}  {view:<13} {r['ms']:>9.1f} {r['leaves_per_s']:>12,.0f} {r['drawn']:>9,}  "
