@@ -73,10 +73,13 @@ vec3 visible_normal() {
     return normalize(v_normal) * (gl_FrontFacing ? 1.0 : -1.0);
 }
 
-// the specular lobe: 0 the plain leaf's, 1 a veined leaf's sunny upper side (narrow gloss), 2 its
-// shadow lower side (broad sheen); constant exponents (a variable one costs llvmpipe exp2(log2()))
+// the specular lobe: 0 the plain leaf's (c^40), 1 a veined leaf's sunny upper side (narrow gloss,
+// c^60), 2 its shadow lower side (broad sheen, c^8); c >= 0. Constant exponents by repeated
+// squaring: pow() is exp2(log2()) on llvmpipe, and this lobe was a fifth of a multisampled
+// thumbnail's time there (docs/benchmarks.md); the products equal pow() to float rounding.
 float spec_lobe(float c, int lobe) {
-    return lobe == 0 ? pow(c, 40.0) : (lobe == 1 ? pow(c, 60.0) : pow(c, 8.0));
+    float c2 = c * c, c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8, c32 = c16 * c16;
+    return lobe == 0 ? c32 * c8 : (lobe == 1 ? (c32 * c16) * (c8 * c4) : c8);
 }
 
 vec3 light_term(vec3 n, vec3 view_dir, vec4 light, vec3 albedo, float translucency, float sheen, int lobe) {
@@ -243,7 +246,8 @@ void main() {
     }
 #endif
 
-    vec3 view_dir = frame.eye.w > 0.5 ? normalize(frame.eye.xyz - v_world) : -normalize(frame.eye.xyz);
+    // one normalize: llvmpipe evaluates both arms of a ?: (and normalize(-x) is -normalize(x))
+    vec3 view_dir = normalize(frame.eye.w > 0.5 ? frame.eye.xyz - v_world : -frame.eye.xyz);
 #ifdef LEAF_CANOPY
 #ifdef LEAF_STEMS
     sheen = 0.02;   // bark: a faint broad sheen

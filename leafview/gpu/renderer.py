@@ -404,10 +404,11 @@ class LeafRenderer:
         self.batch_veins.use()
         self.batch_lobes.use()
         self.frame.bind()   # the capture computes gl_Position too (discarded)
+        leaf_bytes, frame_bytes = LEAF_BLOCK.nbytes, FRAME_BLOCK.nbytes   # (each builds the block's dtype)
         with self.resources.capture.recording(n * nverts, DRAW_VERTEX_BYTES) as rec:
             # 1. the only vertex-shader pass over the leaves: capture, frame each camera on it
             for i in range(n):
-                leaf_rows.bind_to_uniform_block(LEAF_BINDING, offset=i * leaf_stride, size=LEAF_BLOCK.nbytes)
+                leaf_rows.bind_to_uniform_block(LEAF_BINDING, offset=i * leaf_stride, size=leaf_bytes)
                 rec.add(points, nverts)
             frames = np.zeros(n, dtype=FRAME_BLOCK.dtype)
             if camera is not None:
@@ -442,8 +443,7 @@ class LeafRenderer:
                 for i in range(n):
                     x, y = (i % cols) * w, (i // cols) * h
                     self.ctx.viewport = self.ctx.scissor = (x, y, w, h)
-                    frame_rows.bind_to_uniform_block(FRAME_BINDING, offset=i * frame_stride,
-                                                     size=FRAME_BLOCK.nbytes)
+                    frame_rows.bind_to_uniform_block(FRAME_BINDING, offset=i * frame_stride, size=frame_bytes)
                     vao.render_indirect(commands, moderngl.TRIANGLES, count=1, first=i)
             finally:
                 vao.release()

@@ -31,13 +31,14 @@ def read_rgba(fbo: moderngl.Framebuffer) -> NDArray[np.uint8]:
 def unpremultiply(img: NDArray[np.uint8]) -> NDArray[np.uint8]:
     """Resolved multisampled edges over a transparent clear are premultiplied (colour · coverage);
     8-bit images carry straight alpha, so divide the coverage back out."""
-    alpha = img[..., 3:4].astype(np.float32)
-    partial = (alpha > 0) & (alpha < 255)
-    if not partial.any():
+    alpha = img[..., 3]
+    rows, cols = np.nonzero((alpha > 0) & (alpha < 255))   # only the partly covered pixels (the edges)
+    if rows.size == 0:
         return img
     out = img.copy()
-    rgb = np.clip(img[..., :3].astype(np.float32) * 255.0 / np.maximum(alpha, 1.0) + 0.5, 0, 255)
-    out[..., :3] = np.where(partial, rgb, img[..., :3]).astype(np.uint8)
+    a = alpha[rows, cols].astype(np.float32)[:, None]
+    rgb = img[rows, cols, :3].astype(np.float32) * 255.0 / a + 0.5
+    out[rows, cols, :3] = np.clip(rgb, 0, 255).astype(np.uint8)
     return out
 
 
