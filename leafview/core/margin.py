@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from leafview.core.bezier import in_plane_normal
+from leafview.core.bezier import derivative_points, evaluate_curve, in_plane_normal
 from leafview.errors import ParamError
 
 __all__ = ["MarginSide", "Margin", "MAX_GAPS", "SIDE_TEXELS", "MARGIN_TEXELS", "MARGIN_LIMIT",
@@ -87,10 +87,6 @@ class MarginSide:
         if tuple(p[0]) != (0.0, 0.0) or tuple(p[-1]) != (0.0, 1.0):
             raise ParamError(f"{path}.points", "the margin runs from the base [0, 0] to the apex [0, 1], "
                                                f"got {list(self.points[0])} … {list(self.points[-1])}")
-
-    @property
-    def gaps(self) -> int:
-        return len(self.knots) - 1
 
     def to_dict(self) -> dict[str, Any]:
         return {"knots": list(self.knots), "points": [list(p) for p in self.points]}
@@ -232,12 +228,8 @@ def margin_frame(xy: Arr, dxy: Arr, axis: Arr) -> tuple[Arr, Arr, Arr, Arr]:
     ``dxy`` ((M, 2), :func:`side_points`), on the midrib with control points ``axis`` (4, 3)."""
     y, x = xy[:, 1], xy[:, 0]
     dy, dx = dxy[:, 1], dxy[:, 0]
-    t = y[:, None]
-    r = 1.0 - t
-    p0, p1, p2, p3 = axis
-    a = r**3 * p0 + 3 * r * r * t * p1 + 3 * r * t * t * p2 + t**3 * p3
-    da = 3 * (r * r * (p1 - p0) + 2 * r * t * (p2 - p1) + t * t * (p3 - p2))
-    dda = 6 * (r * (p2 - 2 * p1 + p0) + t * (p3 - 2 * p2 + p1))
+    d1 = derivative_points(axis)
+    a, da, dda = (evaluate_curve(c, y) for c in (axis, d1, derivative_points(d1)))
     n, dn = in_plane_normal(da, dda, y)
     P = a
     Q = x[:, None] * n
