@@ -287,7 +287,18 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
     int rows = leaf_branch_rows(LEAF);  // 0: the paper's quartic; LEAF_MARGIN_ROWS: a landmark
                                          // margin; N > 1: an extended silhouette of N rows
 #endif
-    if (rows == 0) {
+    Tv = vec2(0.0);
+    dTv = vec2(0.0);
+    // the paper's quartic (rows 0) and a landmark margin share the heights of the three rows
+    // (degree 4); LEAF_NO_MARGIN / LEAF_NO_SIL_ROWS compile out the branches no leaf of a draw takes
+#if defined(LEAF_NO_EXTENDED)
+    const bool quartic_heights = true;
+#elif defined(LEAF_NO_SIL_ROWS)
+    const bool quartic_heights = true;   // rows is 0 or LEAF_MARGIN_ROWS
+#else
+    bool quartic_heights = rows == 0 || rows == LEAF_MARGIN_ROWS;
+#endif
+    if (quartic_heights) {
         // quartic weights at v for the inner points (the base is the origin, so it drops out) and
         // the apex, and their v-derivatives
         float t = 1.0 - v, v2 = v * v, t2 = t * t;
@@ -296,25 +307,24 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
         vec4 b3 = bernstein3(v);  // quartic derivative weights: 4 (B3_{i-1} - B3_i)
         vec3 dw = 4.0 * (b3.xyz - b3.yzw);
         float dw_apex = 4.0 * b3.w;
-
-        Pv = w.x * P1 + w.y * P2 + w.z * P3 + w_apex * LEAF_APEX;
-        Qv = w.x * Q1 + w.y * Q2 + w.z * Q3;
-        dPv = dw.x * P1 + dw.y * P2 + dw.z * P3 + dw_apex * LEAF_APEX;
-        dQv = dw.x * Q1 + dw.y * Q2 + dw.z * Q3;
         z = vec3(dot(w, zf), dot(w, zg), dot(w, zs));      // zF, zG, zS at v
         dz = vec3(dot(dw, zf), dot(dw, zg), dot(dw, zs));
-    }
-#ifndef LEAF_NO_EXTENDED
-    else {
-        // a landmark margin takes the heights of the paper's three rows (degree 4) from here, and
-        // replaces P, Q and the tilts
-        bool margin = rows == LEAF_MARGIN_ROWS;
-        ext_silhouette(margin ? 3 : rows, v, Pv, Qv, dPv, dQv, z, dz, Tv, dTv);
-        if (margin) {
+#if !defined(LEAF_NO_EXTENDED) && !defined(LEAF_NO_MARGIN)
+        if (rows == LEAF_MARGIN_ROWS) {
+            // the side's B-spline on the midrib replaces P and Q; no tilts
             margin_silhouette(sigma, v, a1, a2, Pv, Qv, dPv, dQv);
-            Tv = vec2(0.0);
-            dTv = vec2(0.0);
+        } else
+#endif
+        {
+            Pv = w.x * P1 + w.y * P2 + w.z * P3 + w_apex * LEAF_APEX;
+            Qv = w.x * Q1 + w.y * Q2 + w.z * Q3;
+            dPv = dw.x * P1 + dw.y * P2 + dw.z * P3 + dw_apex * LEAF_APEX;
+            dQv = dw.x * Q1 + dw.y * Q2 + dw.z * Q3;
         }
+    }
+#if !defined(LEAF_NO_EXTENDED) && !defined(LEAF_NO_SIL_ROWS)
+    else {
+        ext_silhouette(rows, v, Pv, Qv, dPv, dQv, z, dz, Tv, dTv);
     }
 #endif
 
@@ -329,8 +339,8 @@ LeafEval leaf_eval(sampler2D jitter_tex, vec2 uv) {
     e.Lu = sigma * db.x * (Av - Pv) + Qv + vec3(0.0, 0.0, sigma * dot(db.yzw, z));
     e.Lv = b.x * dAv + (1.0 - b.x) * dPv + u * dQv + vec3(0.0, 0.0, dot(b.yzw, dz));
     e.Luv = sigma * db.x * (dAv - dPv) + dQv + vec3(0.0, 0.0, sigma * dot(db.yzw, dz));
-#ifndef LEAF_NO_EXTENDED
-    if (rows > 0) {  // tilted rows: + |u| T(v), T the side-independent tilt offsets (0 for a margin)
+#if !defined(LEAF_NO_EXTENDED) && !defined(LEAF_NO_SIL_ROWS)
+    if (rows > LEAF_MARGIN_ROWS) {  // tilted rows: + |u| T(v), T the side-independent tilt offsets
         e.L.xy += s * Tv;
         e.Lu.xy += sigma * Tv;
         e.Lv.xy += s * dTv;

@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 import leafview
+from leafview.botany.catalogue import landmark_leaf
+from leafview.botany.landmarks import margin_params
 from leafview.core.params import Jitter
 from leafview.deform.surface import grid_uv
 from leafview.gpu.layout import (
@@ -215,9 +217,15 @@ def test_shader_permutations_match_the_full_program(gl, presets):
     assert "LEAF_NO_JITTER" not in feature_defines(pack_leaf(presets["serrate"]))
     extended = shapes_params("elliptic-concave-extended", polish=False)
     one_side = presets["ovate"].replace(shape=dataclasses.replace(presets["ovate"].shape, half=-1))
+    bent = dataclasses.replace(presets["ovate"].shape, a1=(0.06, 0.3, 0.02), a2=(-0.05, 0.72, 0.05))
+    margin = margin_params([landmark_leaf("cordate")], presets["ovate"].replace(shape=bent))[0]
     assert "LEAF_NO_EXTENDED" not in feature_defines(pack_leaf(extended))
+    assert {"LEAF_NO_MARGIN"} <= set(feature_defines(pack_leaf(extended))) - {"LEAF_NO_SIL_ROWS"}
+    assert {"LEAF_NO_SIL_ROWS"} <= set(feature_defines(pack_leaf(margin))) - {"LEAF_NO_MARGIN"}
+    both = np.concatenate([pack_leaf(extended)[None], pack_leaf(margin)[None]])
+    assert not {"LEAF_NO_EXTENDED", "LEAF_NO_MARGIN", "LEAF_NO_SIL_ROWS"} & set(feature_defines(both))
     assert "LEAF_NO_HALF" not in feature_defines(pack_leaf(one_side))
-    leaves = {**presets, "extended": extended, "one side": one_side,
+    leaves = {**presets, "extended": extended, "one side": one_side, "margin": margin,
               "extended, one side": extended.replace(shape=dataclasses.replace(extended.shape, half=1))}
     uv = leafview.deform.surface.grid_uv(9, 15)
     for name, leaf in leaves.items():

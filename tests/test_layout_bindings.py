@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 
 from leafview.app import hotreload
+from leafview.botany.catalogue import landmark_leaf
+from leafview.botany.landmarks import margin_params
 from leafview.core.params import Bending, Jitter
 from leafview.deform.wind import WindSettings
 from leafview.gpu import layout
@@ -228,7 +230,9 @@ def test_accessors_read_what_the_packer_wrote(gl, tmp_path, presets):
 def test_feature_defines_follow_the_slots(presets):
     leaves = _packed_leaves(presets)
     records, _ = pack_leaves(leaves)
-    assert layout.feature_defines(records) == {}
+    assert layout.feature_defines(records) == {"LEAF_NO_MARGIN": 1}   # every kind but a landmark margin
+    with_margin, _ = pack_leaves([*leaves, margin_params([landmark_leaf("cordate")])[0]])
+    assert layout.feature_defines(with_margin) == {}
     assert set(layout.feature_defines(records[:1])) == {"LEAF_NO_EXTENDED", "LEAF_NO_HALF", "LEAF_NO_JITTER",
                                                         "LEAF_NO_RIPPLE", "LEAF_NO_BEND"}
 

@@ -69,24 +69,29 @@ class MarginSide:
         self.check("margin")
 
     def check(self, path: str) -> None:
-        k = np.asarray(self.knots, np.float64)
-        p = np.asarray(self.points, np.float64)
+        self.validate(self.knots, self.points, path)
+
+    @staticmethod
+    def validate(knots: Sequence[float], points: Sequence[Sequence[float]], path: str) -> None:
+        """Refuse knots and points that are no side's margin, naming ``path``'s field."""
+        k = np.asarray(knots, np.float64)
+        p = np.asarray(points, np.float64)
         n = k.size
         if k.ndim != 1 or not 2 <= n <= MAX_GAPS + 1:
             raise ParamError(f"{path}.knots", f"expected 2 to {MAX_GAPS + 1} knots, got {k.size}")
         if not np.all(np.isfinite(k)) or k[0] != 0.0 or k[-1] != 1.0 or np.any(np.diff(k) < MIN_KNOT_GAP):
             raise ParamError(f"{path}.knots", f"expected knots increasing from 0 to 1 by at least {MIN_KNOT_GAP:g}, "
-                                              f"got {list(self.knots)}")
+                                              f"got {list(knots)}")
         if p.shape != (3 * n - 2, 2):
             raise ParamError(f"{path}.points", f"{n} knots take {3 * n - 2} points [x, y], got shape {p.shape}")
         bad = ~np.isfinite(p) | (np.abs(p) > MARGIN_LIMIT)
         if bad.any():
             i = int(np.argwhere(bad)[0][0])
             raise ParamError(f"{path}.points[{i}]", f"expected finite coordinates within ±{MARGIN_LIMIT:g}, "
-                                                    f"got {list(self.points[i])}")
+                                                    f"got {list(points[i])}")
         if tuple(p[0]) != (0.0, 0.0) or tuple(p[-1]) != (0.0, 1.0):
             raise ParamError(f"{path}.points", "the margin runs from the base [0, 0] to the apex [0, 1], "
-                                               f"got {list(self.points[0])} … {list(self.points[-1])}")
+                                               f"got {list(points[0])} … {list(points[-1])}")
 
     def to_dict(self) -> dict[str, Any]:
         return {"knots": list(self.knots), "points": [list(p) for p in self.points]}
@@ -111,11 +116,8 @@ class MarginSide:
             if len(xy) != 2:
                 raise ParamError(f"{path}.points[{i}]", f"expected [x, y], got {len(xy)} numbers")
             points.append((xy[0], xy[1]))
-        side = object.__new__(cls)
-        object.__setattr__(side, "knots", tuple(knots))
-        object.__setattr__(side, "points", tuple(points))
-        side.check(path)
-        return side
+        cls.validate(knots, points, path)   # named by the file's path, before __post_init__ checks again
+        return cls(tuple(knots), tuple(points))
 
     def evaluate(self, v: ArrayLike) -> tuple[Arr, Arr]:
         """(x, y) of the margin at parameters ``v`` in [0, 1] and its derivative d/dv, each (M, 2)."""

@@ -644,12 +644,19 @@ def pack_leaf(params: LeafParams, out: np.ndarray | None = None, *, ripple_row: 
 
 def feature_defines(records: np.ndarray) -> dict[str, int]:
     """Shader permutation for a draw of ``records``: compile out jitter, ripples, bending, the
-    extended silhouette or the one-sided half when no record uses them (llvmpipe runs vertex
-    shaders on the CPU, where unused branches cost)."""
+    row data (``LEAF_NO_EXTENDED``; or, of its two kinds, the landmark margin ``LEAF_NO_MARGIN`` or
+    the extended silhouette ``LEAF_NO_SIL_ROWS``) or the one-sided half when no record uses them
+    (llvmpipe runs vertex shaders on the CPU, where unused branches cost)."""
     recs = np.atleast_1d(records)
     defines = {}
-    if not (read_slot(recs, "leaf_rows") > 0).any():
+    rows = read_slot(recs, "leaf_rows")
+    if not (rows > 0).any():
         defines["LEAF_NO_EXTENDED"] = 1
+    else:   # the two kinds that use the row data: landmark margins and extended silhouettes
+        if not (rows == MARGIN_ROWS).any():
+            defines["LEAF_NO_MARGIN"] = 1
+        if not (rows > MARGIN_ROWS).any():
+            defines["LEAF_NO_SIL_ROWS"] = 1
     if not (read_slot(recs, "leaf_half") != 0).any():
         defines["LEAF_NO_HALF"] = 1
     if not (read_slot(recs, "leaf_jitter_amplitude") > 0).any():
