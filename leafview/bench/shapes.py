@@ -16,7 +16,8 @@ is asserted:
   (``generated_polished_per_s`` the same with the polished fit);
 * ``extended_vs_quartic_frame``: frame time of leaves on the extended silhouette path ÷ the same
   count of the paper's quartic leaves (the cost of the extension); ``margin_vs_quartic_frame`` the
-  same for leaves drawn with their landmark margin (:mod:`leafview.core.margin`);
+  same for leaves drawn with their landmark margin (:mod:`leafview.core.margin`); both in
+  interleaved rounds (``bench.timing.interleaved``), with their range (``…_range``);
 * bytes of the leaf record;
 * ``landmark_leaves_per_s`` (issue 20): random instances of all 62 catalogue shapes end to end,
   per leaf: generated (:func:`~leafview.botany.catalogue.random_instance`), made shader-ready
@@ -43,13 +44,14 @@ from __future__ import annotations
 
 import statistics
 import time
+from collections.abc import Callable
 from typing import Any
 
 import moderngl
 import numpy as np
 
 from leafview.bench import PAPER_LEAVES_PER_S
-from leafview.bench.timing import bench_context, gl_info, median_time
+from leafview.bench.timing import bench_context, gl_info, interleaved, median_time
 from leafview.botany.batch_fit import controls_from_params, fit_outlines, min_jacobians, outline_errors, split_outlines
 from leafview.botany.catalogue import catalogue_names, landmark_leaf, random_instance
 from leafview.botany.landmarks import margin_params, outline, outlines
@@ -88,24 +90,57 @@ def _scatter(leaves: list[Any], count: int, seed: int = 0) -> list[Any]:
 
 def _frame_time(ctx: moderngl.Context, leaves: list[Any], repeats: int) -> tuple[float, float]:
     """(median frame seconds, upload seconds) drawing ``leaves`` in one instanced draw."""
-    cam = top_down((0.0, 0.0), 10.0, 1.0, 1.0, 20.0)   # the [-1, 1]² square the leaves lie in, z ∈ [-10, 10]
-    records, tables = pack_leaves(leaves)
     with OffscreenTarget(ctx, SIZE) as target:
-        target.use()
         t0 = time.perf_counter()
-        inst = InstancedLeaves(ctx, records, GRID, jitter_tables=tables)
+        inst = _instanced(ctx, leaves)
         ctx.finish()
         upload = time.perf_counter() - t0
         with inst:
-            inst.set_camera(cam)
-
-            def frame() -> None:
-                target.clear()
-                inst.draw()
-
+            frame = _frame(target, inst)
             frame()
             ctx.finish()
             return median_time(frame, repeats, ctx.finish), upload
+
+
+def _instanced(ctx: moderngl.Context, leaves: list[Any]) -> InstancedLeaves:
+    """``leaves`` uploaded for one instanced draw, seen from above (the [-1, 1]² square they lie in)."""
+    records, tables = pack_leaves(leaves)
+    inst = InstancedLeaves(ctx, records, GRID, jitter_tables=tables)
+    inst.set_camera(top_down((0.0, 0.0), 10.0, 1.0, 1.0, 20.0))
+    return inst
+
+
+def _rounds(r: list[float]) -> str:
+    return f"{r[0]:.2f}-{r[1]:.2f}"
+
+
+def _frame(target: OffscreenTarget, inst: InstancedLeaves) -> Callable[[], None]:
+    def frame() -> None:
+        target.use()
+        target.clear()
+        inst.draw()
+    return frame
+
+
+def _kind_ratios(ctx: moderngl.Context, res: dict[str, Any], count: int, n_fast: int, rounds: int) -> None:
+    """Frame time of the same count of leaves on the extended silhouette and with their landmark
+    margin drawn, each ÷ the paper's quartic leaves, in interleaved rounds."""
+    kinds = {"quartic": _scatter([shapes_params("ovate")], count),
+             "extended": _scatter([shapes_params("cordate")], count),
+             "margin": _scatter(margin_params(_landmarks(n_fast)), count)}
+    with OffscreenTarget(ctx, SIZE) as target:
+        insts = {k: _instanced(ctx, v) for k, v in kinds.items()}
+        try:
+            quartic = _frame(target, insts["quartic"])
+            for kind in ("extended", "margin"):
+                r = interleaved(quartic, _frame(target, insts[kind]), rounds, ctx.finish)
+                res[f"{kind}_vs_quartic_frame"] = r["ratio"]
+                res[f"{kind}_vs_quartic_frame_range"] = r["range"]
+                res[f"{kind}_frame_ms"] = r["other_ms"]
+                res.setdefault("quartic_frame_ms", r["base_ms"])
+        finally:
+            for inst in insts.values():
+                inst.release()
 
 
 def _draw_batch(ctx: moderngl.Context, resources: GpuResources, target: OffscreenTarget, records: Any,
@@ -272,17 +307,9 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
         res["generated_polished_per_s"] = 1.0 / (per_leaf - 1.0 / res["fit_fast_per_s"] + 1.0 / res["fit_polished_per_s"])
         res["vs_paper_550"] = res["generated_per_s"] / PAPER_LEAVES_PER_S
 
-        quartic = _scatter([shapes_params("ovate")], count)
-        extended = _scatter([shapes_params("cordate")], count)
-        tq, _ = _frame_time(ctx, quartic, 3 if quick else 7)
-        te, _ = _frame_time(ctx, extended, 3 if quick else 7)
-        res["quartic_frame_ms"], res["extended_frame_ms"] = 1e3 * tq, 1e3 * te
-        res["extended_vs_quartic_frame"] = te / tq
-        # the landmark margin drawn as the silhouette (leafview.core.margin): its cost in the shader
-        drawn_margins = _scatter(margin_params(_landmarks(n_fast)), count)
-        tm, _ = _frame_time(ctx, drawn_margins, 3 if quick else 7)
-        res["margin_frame_ms"] = 1e3 * tm
-        res["margin_vs_quartic_frame"] = tm / tq
+        # the extended silhouette and the landmark margin drawn as the silhouette
+        # (leafview.core.margin): their cost in the shader, side by side with quartic leaves
+        _kind_ratios(ctx, res, count, n_fast, 3 if quick else 7)
         res["record_bytes"] = LEAF_BLOCK.nbytes
         res["param_bytes"] = LEAF_BLOCK.parameter_nbytes
         _landmark_rates(ctx, res, quick)
@@ -306,9 +333,11 @@ def format_table(res: dict[str, Any]) -> str:
          f"(with the polished fit: {res['generated_polished_per_s']:,.2f} /s)"),
         ("  vs the paper's ~550 /s", f"{res['vs_paper_550']:.3g}×"),
         ("extended ÷ quartic frame time", f"{res['extended_vs_quartic_frame']:.2f}  "
-         f"({res['extended_frame_ms']:.1f} / {res['quartic_frame_ms']:.1f} ms)"),
+         f"({res['extended_frame_ms']:.1f} / {res['quartic_frame_ms']:.1f} ms, "
+         f"rounds {_rounds(res['extended_vs_quartic_frame_range'])})"),
         ("landmark margin ÷ quartic frame time", f"{res['margin_vs_quartic_frame']:.2f}  "
-         f"({res['margin_frame_ms']:.1f} / {res['quartic_frame_ms']:.1f} ms)"),
+         f"({res['margin_frame_ms']:.1f} / {res['quartic_frame_ms']:.1f} ms, "
+         f"rounds {_rounds(res['margin_vs_quartic_frame_range'])})"),
         ("leaf record: parameters / whole", f"{res['param_bytes']} B / {res['record_bytes']} B"),
     ]
     if "landmark_leaves_per_s" in res:
