@@ -23,10 +23,15 @@
    :func:`~leafview.botany.outline_fit.fit_outline` in a fraction of the time when the target
    lies below the outline's noise, where ``fit_outline`` polishes every row count.)
 
-   Two touching leaves are refused at three points. The neck test of
+   Two touching leaves are refused at four points. The neck test of
    :mod:`leafview.fit.photo_outline` refuses pairs meeting at a narrow neck. Before the fit, a
    region that parts between two notches into two convex blades
-   (:func:`leafview.fit.photo_shape.two_blades`) is refused. After it, a region that even the
+   (:func:`leafview.fit.photo_shape.two_blades`) is refused, and so is one that looks lobed or is
+   notched twice (:func:`leafview.fit.photo_lobed.two_notches`) but is not mirror-symmetric
+   (``lobed="auto"``, landmarks found): its IoU with its mirror image in its best axis
+   (:func:`leafview.fit.photo_lobed.symmetry_axis`) is below
+   :data:`~leafview.fit.photo_lobed.LOBED_MIN_MIRROR` or
+   :data:`~leafview.fit.photo_lobed.NOTCHED_MIN_MIRROR` (two blades in a V, a T or an X). After it, a region that even the
    better of the two fits misses by more than :data:`TOUCHING_FIT_ERROR` leaf lengths is refused,
    unless its outline looks lobed (``lobed="off"`` on a lobed leaf: Ω misses its lobes). Such a
    region is not one leaf with these landmarks: two leaves touching along an edge or overlapping
@@ -66,13 +71,17 @@ from leafview.core.params import SCALE_RANGE, Bending, LeafParams, Transform
 from leafview.errors import ParamError
 from leafview.fit.blas import single_threaded
 from leafview.fit.photo_lobed import (
+    LOBED_MIN_MIRROR,
     LOBED_MODES,
+    NOTCHED_MIN_MIRROR,
     LobeMeasures,
     fit_lobed_margin,
     lobe_measures,
     lobed_landmarks,
     lobed_leaf,
     looks_lobed,
+    symmetry_axis,
+    two_notches,
 )
 from leafview.fit.photo_outline import LeafOutline, Photo, as_photo, leaf_outline
 from leafview.fit.photo_shape import BLADES_SOLIDITY, two_blades
@@ -384,8 +393,19 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
     measures = lobe_measures(traced.outline)
     looks = looks_lobed(measures)
     is_lobed = lobed == "on" or (lobed == "auto" and looks)
+    axis = None
+    if lobed == "auto" and base is None and apex is None and (looks or two_notches(measures)):
+        axis = symmetry_axis(traced.outline)
+        least = LOBED_MIN_MIRROR if looks else NOTCHED_MIN_MIRROR
+        if axis[2] < least:
+            raise ParamError("" if source else "image",
+                             f"two touching leaves? the leaf-coloured region "
+                             f"{'looks lobed' if looks else 'is notched twice'}, but its mirror image in its "
+                             f"best axis covers only {100 * axis[2]:.0f} % of it (one leaf ≥ {100 * least:.0f} %); "
+                             f"photograph one leaf at a time, apart from others, or give --lobed "
+                             f"{'on' if looks else 'off'}", source)
     if is_lobed and base is None and apex is None:
-        traced = _lobed_landmarks(traced, measures)
+        traced = _lobed_landmarks(traced, measures, axis)
     t2 = time.perf_counter()
     length_px = float(np.hypot(*(traced.apex - traced.base)))
     if not length_px >= MIN_LENGTH_PX:
@@ -485,10 +505,11 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
 
 
 # -- a lobed leaf ----------------------------------------------------------------------------------------
-def _lobed_landmarks(traced: LeafOutline, measures: LobeMeasures) -> LeafOutline:
+def _lobed_landmarks(traced: LeafOutline, measures: LobeMeasures,
+                     axis: tuple[F64, F64, float] | None = None) -> LeafOutline:
     """``traced`` with the base and apex of a lobed blade (:func:`lobed_landmarks`), the outline
     starting at the point nearest the base."""
-    b, a = lobed_landmarks(traced.outline, traced.petiole, measures)
+    b, a = lobed_landmarks(traced.outline, traced.petiole, measures, axis)
     k = int(np.argmin(np.hypot(*(traced.outline - b).T)))
     return replace(traced, base=np.asarray(b, np.float64), apex=np.asarray(a, np.float64),
                    outline=np.roll(traced.outline, -k, axis=0))

@@ -32,7 +32,10 @@
   petiole when it is long (:data:`PETIOLE_MIN_LENGTH` of the leaf's extent and eight times its
   half-width, at least), not a hair (half-width :data:`PETIOLE_MIN_RADIUS` px at least) and of
   even width (its free third at least :data:`PETIOLE_EVENNESS` as wide as its middle: an apex tip
-  tapers to nothing); the longest such candidate wins.
+  tapers to nothing); the longest such candidate wins. A petiole whose free end lies more than
+  :data:`PETIOLE_TURN` degrees off the line from the base it gives to the apex found from there
+  (seen from that base) is none (a tooth on a shoulder, a sliver along the edge, or a narrow second
+  leaf against the blade's side): base and apex are then found as for a blade without one.
 * **Base with a petiole.** Walking the petiole's centre line from its free end (cut where it
   leaves the even petiole), then straight on into the blade, the mask's chord across the walk is
   measured; the blade starts where the half-chord first exceeds twice the petiole's half-width.
@@ -49,12 +52,17 @@
 * **Base without a petiole.** The blade's principal axis (through its centroid) meets the
   outline at two ends; on a blade wider than long the midrib runs across that axis, which the
   veins tell (:func:`_vein_sense` clear across it and :data:`VEIN_TURN` times clearer than
-  along it), and the axis is turned by 90°. The base end is, in order: the end opposite a given
-  apex; the end the secondary veins open away from (when clear: an emarginate apex has a notch
-  too); the end with a notch (a crossing more than :data:`NOTCH_DEPTH` of the length inside the
-  outline's convex hull: a cordate base); the blunter end (wider by 15 % at a tenth of the length
-  from it: apices are usually acute); else the end nearer the widest part (most leaves are
-  widest below the middle), with a warning.
+  along it), and the axis is turned by 90°. Only a blade not much longer than wide (principal
+  standard deviations within :data:`VEIN_TURN_ELONGATION`) is turned: on a narrow one the teeth
+  and the edges' shading can outweigh the veins (a narrow serrated leaf, 15 times longer than
+  wide in these terms, had its base found mid-blade, 36 % of its length off). The base end is,
+  in order: the end opposite a given apex; the end the secondary veins open away from (when
+  clear: an emarginate apex has a notch too); the end with a notch (a crossing more than
+  :data:`NOTCH_DEPTH` of the length inside the outline's convex hull: a cordate base); the
+  blunter end (wider by 15 % at a tenth of the length from it: apices are usually acute); the end
+  that is a stalk where the other tapers (:func:`_stalk_end`: a petiole too wide to be found as
+  one), with a warning; else the end nearer the widest part (most leaves are widest below the
+  middle), with a warning.
   The base itself is the notch's sinus; else the outline point farthest from the apex, unless that
   lies more than :data:`SHOULDER` of the width off the axis (a shoulder of a truncate base), where
   the axis' crossing is used; a pointed base is followed on along its taper as the apex is
@@ -110,6 +118,7 @@ PETIOLE_RADIUS = 0.25         # opening radius / largest inscribed radius of the
 PETIOLE_MIN_LENGTH = 0.04     # petiole length / extent of the leaf, at least
 PETIOLE_MIN_RADIUS = 1.0      # px: a thinner strand is an apex tip or noise
 PETIOLE_EVENNESS = 0.7        # width of the free third / width of the middle third, at least
+PETIOLE_TURN = 60.0           # degrees: a petiole running more off the base-apex line is none
 BASE_EXTRAPOLATION = 1.0      # of the distance back to zero width at the blade's first slope
 BASE_RUN = 0.1               # the mean growth is read from twice to four times the petiole's half-width, over at most this of the extent
 BASE_BACK = 0.25             # the extrapolation reaches back at most this of the extent
@@ -120,6 +129,9 @@ TIP_MIN_SLOPE = 0.15         # ... and one widening slower is a stalk (a short p
 TIP_MAX = 0.04               # the tip moves on at most this (of the length)
 VEIN_SENSE = 0.03             # |vein sense| from which the veins tell the apex's end
 VEIN_TURN = 2.0               # the veins' sense across the principal axis / along it, from which the midrib runs across
+VEIN_TURN_ELONGATION = 2.0    # ... on a blade whose principal standard deviations differ less than this (wider than long)
+STALK_NEAR, STALK_FAR = 0.03, 0.09  # of the extent from an end: where a stalk's width is compared
+STALK_EVEN = 0.75             # a stalk's near width / its far width, at least
 SHOULDER = 1 / 3              # farthest point off the axis by this much of the width: a truncate base
 ROUND_BLADE = 1.15            # principal standard deviations closer than this: a round blade
 NOTCH_DEPTH = 0.02            # of the blade's length
@@ -601,6 +613,20 @@ def _vein_sense(grey: NDArray[np.float32] | None, blade: NDArray[np.bool_], cent
     return float(-np.sum(side * g_s * g_l) / energy), float(-np.sum(ahead * g_s * g_l) / energy)
 
 
+def _stalk_end(s: Array, lat: Array, extent: float, step: float) -> int | None:
+    """0 (the low end along the axis) or 1 where one end of the blade is a stalk and the other
+    tapers, else None. A stalk (a petiole too wide or too short to be found as one) keeps its
+    width from :data:`STALK_NEAR` to :data:`STALK_FAR` of the extent in (the near width at least
+    :data:`STALK_EVEN` of the far one); a tapering end narrows towards its end."""
+    even = []
+    for end, sense in ((float(s.min()), 1.0), (float(s.max()), -1.0)):
+        near, far = (_width_at(s, lat, end + sense * k * extent, step) for k in (STALK_NEAR, STALK_FAR))
+        if far <= 0.0:
+            return None
+        even.append(near >= STALK_EVEN * far)
+    return None if even[0] == even[1] else (0 if even[0] else 1)
+
+
 def _base_without_petiole(contour: Array, centre: Array, axis: Array, apex: Array | None, step: float,
                           veins: float) -> tuple[Array, str | None]:
     """The base of a blade with no petiole (module docstring) and a warning when it is a guess.
@@ -620,6 +646,10 @@ def _base_without_petiole(contour: Array, centre: Array, axis: Array, apex: Arra
         b = int(np.argmax(notch))
     elif max(near) > 1.15 * max(min(near), 1e-9):
         b = int(np.argmax(near))
+    elif (stalk := _stalk_end(s, lat, extent, step)) is not None:
+        b = stalk
+        note = ("the base was told from the apex by a stalk at one end only (a petiole not found as one): "
+                "check it, or give --base and --apex")
     else:
         ss = np.linspace(float(s.min()), float(s.max()), 41)[1:-1]
         widest = float(ss[int(np.argmax([_width_at(s, lat, x, step) for x in ss]))])
@@ -731,29 +761,15 @@ def _up(mask: NDArray[np.bool_], f: int, shape: tuple[int, int]) -> NDArray[np.b
     return np.asarray(np.repeat(np.repeat(mask, f, axis=0), f, axis=1)[:shape[0], :shape[1]], bool)
 
 
-def leaf_shape(mask: NDArray[np.bool_], *, fine: NDArray[np.bool_] | None = None, f: int = 1,
-               grey: NDArray[np.float32] | None = None, base: Array | None = None,
-               apex: Array | None = None) -> Shape:
-    """Blade, outline, base, apex and petiole of the leaf ``mask`` (module docstring).
-
-    ``mask`` is the leaf at working resolution; ``fine`` the same leaf ``f`` times finer (pixel
-    (i, j) of ``mask`` covers rows i·f .. i·f + f - 1 and columns j·f .. j·f + f - 1 of ``fine``),
-    or None when they are one; ``grey`` the photo's brightness aligned with ``mask`` (for the
-    veins), if known. Blade-scale work (distance transform, opening, outline) is done on
-    ``mask``, the thin petiole on ``fine``; everything returned is in ``fine``'s pixels. ``base``
-    and ``apex`` ((x, y) in ``fine``'s pixels), where given, are kept."""
-    fine = mask if fine is None else fine
-
+def _landmarks(mask: NDArray[np.bool_], fine: NDArray[np.bool_], f: int, grey: NDArray[np.float32] | None,
+               pet: _Petiole | None, extent: float, base: Array | None,
+               apex: Array | None) -> tuple[NDArray[np.bool_], Array, Array, Array, Array, list[str]]:
+    """(blade at ``fine``'s resolution, petiole line, contour, base, apex, warnings) of the leaf
+    ``mask`` with the petiole ``pet`` (or none), as :func:`leaf_shape` finds them."""
     def to_fine(p: Array) -> Array:
         return np.asarray((p + 0.5) * f - 0.5, np.float64)
 
     warnings: list[str] = []
-    edt = ndimage.distance_transform_edt(np.pad(mask, 1, mode="edge"))[1:-1, 1:-1]
-    centre, axis = _axis(mask)
-    extent = float(np.ptp((np.argwhere(mask)[:, ::-1] - centre) @ axis)) * f
-    opened = _opened(mask, edt)
-    core = _up(ndimage.binary_dilation(opened, _EIGHT) if f > 1 else opened, f, fine.shape)
-    pet = _find_petiole(fine, core, extent)
     blade, blade_w = fine, mask
     petiole = np.zeros((0, 2))
     if pet is not None:
@@ -774,7 +790,8 @@ def leaf_shape(mask: NDArray[np.bool_], *, fine: NDArray[np.bool_] | None = None
                         "or give --base and --apex")
     if base is None:
         veins, across = _vein_sense(grey, blade_w, centre_w, axis)
-        if abs(across) >= VEIN_SENSE and abs(across) > VEIN_TURN * abs(veins):
+        if (abs(across) >= VEIN_SENSE and abs(across) > VEIN_TURN * abs(veins)
+                and elongation < VEIN_TURN_ELONGATION):
             axis, veins = np.array([-axis[1], axis[0]]), across     # the midrib runs across the principal axis
         base, note = _base_without_petiole(contour, centre, axis, apex, float(f), veins)
         if note:
@@ -783,6 +800,45 @@ def leaf_shape(mask: NDArray[np.bool_], *, fine: NDArray[np.bool_] | None = None
         apex, notched = _midrib_end(contour, base, centre)
         if not notched:
             apex = _taper_tip(contour, base, apex, float(f))
+    return blade, petiole, contour, base, apex, warnings
+
+
+def _off_axis(pet: _Petiole, found: tuple[NDArray[np.bool_], Array, Array, Array, Array, list[str]]) -> bool:
+    """Whether the petiole ``pet`` runs more than :data:`PETIOLE_TURN` degrees off the line from the
+    base to the apex ``found`` with it, from its free end to that base (its centre line's own end
+    forks where it flares into the blade): a tooth on a shoulder, a sliver along the blade's edge,
+    or a second, narrow leaf lying against the blade's side, not a petiole."""
+    _, _, _, base, apex, _ = found
+    into, ahead = base - pet.path[0], apex - base
+    norm = float(np.hypot(*into)) * float(np.hypot(*ahead))
+    return norm > 0 and float(into @ ahead) < math.cos(math.radians(PETIOLE_TURN)) * norm
+
+
+def leaf_shape(mask: NDArray[np.bool_], *, fine: NDArray[np.bool_] | None = None, f: int = 1,
+               grey: NDArray[np.float32] | None = None, base: Array | None = None,
+               apex: Array | None = None) -> Shape:
+    """Blade, outline, base, apex and petiole of the leaf ``mask`` (module docstring).
+
+    ``mask`` is the leaf at working resolution; ``fine`` the same leaf ``f`` times finer (pixel
+    (i, j) of ``mask`` covers rows i·f .. i·f + f - 1 and columns j·f .. j·f + f - 1 of ``fine``),
+    or None when they are one; ``grey`` the photo's brightness aligned with ``mask`` (for the
+    veins), if known. Blade-scale work (distance transform, opening, outline) is done on
+    ``mask``, the thin petiole on ``fine``; everything returned is in ``fine``'s pixels. ``base``
+    and ``apex`` ((x, y) in ``fine``'s pixels), where given, are kept."""
+    fine = mask if fine is None else fine
+    warnings: list[str] = []
+    edt = ndimage.distance_transform_edt(np.pad(mask, 1, mode="edge"))[1:-1, 1:-1]
+    centre, axis = _axis(mask)
+    extent = float(np.ptp((np.argwhere(mask)[:, ::-1] - centre) @ axis)) * f
+    opened = _opened(mask, edt)
+    core = _up(ndimage.binary_dilation(opened, _EIGHT) if f > 1 else opened, f, fine.shape)
+    pet = _find_petiole(fine, core, extent)
+    given = base
+    found = _landmarks(mask, fine, f, grey, pet, extent, given, apex)
+    if pet is not None and given is None and _off_axis(pet, found):
+        found = _landmarks(mask, fine, f, grey, None, extent, given, apex)    # a tooth or a second leaf, not a petiole
+    blade, petiole, contour, base, apex, notes = found
+    warnings += notes
     length = max(float(np.hypot(*(apex - base))), 1.0)
     controls, hausdorff = fit_closed_bspline(contour, max(0.5 * f, OUTLINE_TOLERANCE * length), 0.5 * f)
     if hausdorff > max(0.75 * f, OUTLINE_WARN * length):
