@@ -28,7 +28,6 @@ import time
 from pathlib import Path
 from typing import Any
 
-from leafview.app.scene_view import view_scene
 from leafview.atomic import outputs
 from leafview.botany.vein_shading import without_veins
 from leafview.cli.args import (
@@ -271,6 +270,8 @@ def run(args: argparse.Namespace) -> int:
         # the edit panel's Save writes the recipe: to --save's file, else back to the scene file opened
         recipe = None if leaves is not None else (args.save if args.save and not args.save.lower().endswith(
             ".leaves.json") else args.scene)
+        # the window (imgui, the viewer's panels: 0.5-0.7 s of imports) only for --view, not offscreen
+        from leafview.app.scene_view import view_scene
         return view_scene(saved, size=args.size, frames=args.frames, screenshot=args.screenshot,
                           veins=not veins_off(args), path=recipe)
     return EXIT_OK

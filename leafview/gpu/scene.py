@@ -50,7 +50,7 @@ from typing import Any
 import moderngl
 import numpy as np
 from numpy.typing import NDArray
-from scipy.ndimage import distance_transform_edt
+from scipy.spatial import cKDTree
 
 from leafview.botany import leaf_surface
 from leafview.botany.vein_shape import shape_grid
@@ -225,15 +225,31 @@ def species_tables(scene: Scene, vein_layers: NDArray[np.int32] | None = None,
 _OMEGA_MEMBERS = ("a1", "a2", "vbar", "xs", "zs", "zf", "zg")
 _OMEGA_FACTORS = np.array([0, 1, 2, 3, 4, 5, 6, 9, 12, 7, 10, 13, 8, 11, 14, 15, 16, 17, 18, 19, 20])
 _PACK_CHUNK = 2048     # rows packed at once (1.6 MB of records)
+# the factor columns of Ω's members as vec4s: column 21 (a column of ones) for each w
+_OMEGA_PADDED = np.insert(_OMEGA_FACTORS.reshape(len(_OMEGA_MEMBERS), 3), 3, _OMEGA_FACTORS.size, axis=1).ravel()
+_COLOUR_LOW = np.array([0, 0, 0, -np.inf] * 2, np.float32)   # front and back: rgb in [0, 1], w left alone
+_COLOUR_HIGH = np.array([1, 1, 1, np.inf] * 2, np.float32)
 
 
-def _vec4_run(recs: NDArray[Any], members: Sequence[str]) -> NDArray[np.float32]:
-    """(N, len(members), 4) float32 view of consecutive vec4 members of LEAF_BLOCK records."""
+def _run_start(recs: NDArray[Any], members: Sequence[str]) -> int:
+    """Byte offset in a LEAF_BLOCK record of the consecutive vec4 ``members``."""
     fields = recs.dtype.fields
     assert fields is not None
     first = int(fields[members[0]][1])
     assert [int(fields[m][1]) for m in members] == list(range(first, first + 16 * len(members), 16)), members
-    return np.ndarray((len(recs), len(members), 4), np.float32, recs, first, (recs.dtype.itemsize, 16, 4))
+    return first
+
+
+def _vec4_run(recs: NDArray[Any], members: Sequence[str]) -> NDArray[np.float32]:
+    """(N, len(members), 4) float32 view of consecutive vec4 members of LEAF_BLOCK records."""
+    return np.ndarray((len(recs), len(members), 4), np.float32, recs, _run_start(recs, members),
+                      (recs.dtype.itemsize, 16, 4))
+
+
+def _float_run(recs: NDArray[Any], members: Sequence[str]) -> NDArray[np.float32]:
+    """The same floats as :func:`_vec4_run`, (N, 4·len(members)): one contiguous run a row."""
+    return np.ndarray((len(recs), 4 * len(members)), np.float32, recs, _run_start(recs, members),
+                      (recs.dtype.itemsize, 4))
 
 
 def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
@@ -261,21 +277,30 @@ def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
     source = np.ascontiguousarray(species_records).view(row)
     loads = load_table(scene.species, scene.spec.varieties) if scene.load_scale is not None else None
     p_max = np.float32(1.0)   # the ripple amplitude's hard maximum (leafview.scene.variety.leaf_ripple)
+    factors = np.ones((_PACK_CHUNK, _OMEGA_FACTORS.size + 1), np.float32)   # the last column: the w's 1
+    tints = np.empty((_PACK_CHUNK, 8), np.float32)                            # each row: tint × 3, 1, tint × 3, 1
     for a in range(0, n, _PACK_CHUNK):
         b = min(a + _PACK_CHUNK, n)
         part = recs[a:b]
         np.take(source, scene.species_id[start + a:start + b], axis=0, out=part.view(row))
+        # Ω's seven vec4s as one run of 28 floats a row, scaled by the factors with 1 in the w's
+        # (which hold layers, exact under × 1): one contiguous inner loop a row, not seven of three
+        factors[:b - a, :_OMEGA_FACTORS.size] = scene.factors[start + a:start + b]
+        _float_run(part, _OMEGA_MEMBERS)[...] *= factors[:b - a, _OMEGA_PADDED]
         omega = _vec4_run(part, _OMEGA_MEMBERS)[:, :, :3]
-        omega *= scene.factors[start + a:start + b][:, _OMEGA_FACTORS].reshape(b - a, len(_OMEGA_MEMBERS), 3)
         if scene.offsets is not None:   # scene-wide edits: Ω = species × factors + offsets
             omega += scene.offsets[start + a:start + b][:, _OMEGA_FACTORS].reshape(b - a, len(_OMEGA_MEMBERS), 3)
         vbar = omega[:, _OMEGA_MEMBERS.index("vbar")]
         np.clip(vbar, np.float32(0.02), np.float32(0.98), out=vbar)
         for k in (1, 2):   # the feet stay in order, as vary_shape keeps them
             np.maximum(vbar[:, k], vbar[:, k - 1] + np.float32(VBAR_GAP), out=vbar[:, k])
-        colours = _vec4_run(part, ("front", "back"))[:, :, :3]
-        colours *= scene.tint[start + a:start + b, None, None].astype(np.float32)
-        np.clip(colours, np.float32(0.0), np.float32(1.0), out=colours)
+        # front and back as 8 floats a row: rgb × tint clipped to [0, 1], the w's (translucency,
+        # drawn half) × 1 and clipped to ±inf, unchanged
+        colours = _float_run(part, ("front", "back"))
+        tints[:b - a] = scene.tint[start + a:start + b, None]
+        tints[:b - a, 3::4] = 1.0
+        colours *= tints[:b - a]
+        np.clip(colours, _COLOUR_LOW, _COLOUR_HIGH, out=colours)
         # rows 0-2 of each column: the last row keeps the species' texture and vein layers (LEAF_SLOTS)
         part["model"][:, :, :3] = np.transpose(scene.matrices[start + a:start + b, :3], (0, 2, 1))
         _write_variety(scene, part, start + a, start + b, loads, p_max)
@@ -488,7 +513,7 @@ class _SceneBatch:
             self.row_texture = (self._objects.own(RowTexture(ctx, self.rows, self.count))
                                 if needs_row_texture(owner.species_records) else None)
             self.species_of = self._objects.own(
-                ctx.buffer(owner.scene.species_id[start:stop].astype(np.uint32).tobytes()))
+                ctx.buffer(owner.scene.species_id[start:stop].astype(np.uint32)))
             levels = len(owner.command_grids)
             self.visible = self._objects.own(ctx.buffer(reserve=4 * self.count * levels))
             self.vertices = self._objects.own(ctx.buffer(reserve=LEAF_VERTEX_BLOCK.nbytes * self.count))
@@ -663,8 +688,8 @@ class SceneRenderer:
         verts["p"], verts["n"], verts["uv"] = pos, nrm, (1.0, 0.5)  # u = 1: no midrib band
         verts["front"] = np.round(np.asarray(STEM_FRONT) * 255)
         verts["back"][:, :3] = np.round(np.asarray(STEM_BACK) * 255)
-        vbo = self._objects.own(self.ctx.buffer(verts.tobytes()))
-        ibo = self._objects.own(self.ctx.buffer(np.asarray(tris, np.uint32).tobytes()))
+        vbo = self._objects.own(self.ctx.buffer(verts))   # the arrays' own bytes, no copies
+        ibo = self._objects.own(self.ctx.buffer(np.ascontiguousarray(tris, np.uint32)))
         self._stem_buffers = (vbo, ibo)
         return self._stem_vao(self.resources.programs.program("leaf_baked.vert", "leaf.frag",
                                                               defines={**PLAIN_DEFINES, **NO_VEIN_DEFINES}))
@@ -965,6 +990,25 @@ def lod_switch_error(ctx: moderngl.Context, presets: Sequence[str], settings: Cu
                     masks.append(img[..., 3] > 127)
                 a, b = masks
                 if a.any() and b.any():
-                    da, db = distance_transform_edt(~a), distance_transform_edt(~b)
-                    worst = max(worst, float(da[b].max()), float(db[a].max()))
+                    worst = max(worst, _farthest(a, b), _farthest(b, a))
     return worst
+
+
+def _edge(mask: NDArray[np.bool_]) -> NDArray[np.bool_]:
+    """The pixels of ``mask`` with a 4-neighbour outside it (or on the image's border)."""
+    p = np.pad(mask, 1)
+    inner = p[1:-1, :-2] & p[1:-1, 2:] & p[:-2, 1:-1] & p[2:, 1:-1]
+    return mask & ~inner
+
+
+def _farthest(a: NDArray[np.bool_], b: NDArray[np.bool_]) -> float:
+    """Largest distance (pixels) from a pixel of ``b`` to the nearest pixel of ``a`` (not empty):
+    one half of the Hausdorff distance, the largest of ``b``'s values in the Euclidean distance
+    transform of ``~a``. The nearest pixel of ``a`` to a pixel outside it is on ``a``'s edge (a
+    step from an inner pixel towards the outside one stays in ``a`` and comes closer), so only the
+    edge goes into the tree."""
+    outside = b & ~a
+    if not outside.any():
+        return 0.0
+    distance, _ = cKDTree(np.argwhere(_edge(a))).query(np.argwhere(outside))
+    return float(np.max(distance))

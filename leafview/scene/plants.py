@@ -249,7 +249,11 @@ def _unit(v: NDArray[np.float64]) -> NDArray[np.float64]:
 # over contiguous memory (10⁶ leaves in a field), without (N, 3) temporaries or strided columns
 def _cross_rows(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """Cross products of the columns of (3, N) arrays (``b`` may be a (3, 1) constant)."""
-    return np.stack([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    for i, (j, k) in enumerate(((1, 2), (2, 0), (0, 1))):   # each row written in place: no stacked copy
+        np.multiply(a[j], b[k], out=out[i])
+        out[i] -= a[k] * b[j]
+    return out
 
 
 def _rotate_rows(v: NDArray[np.float64], axis: NDArray[np.float64], c: NDArray[np.float64],
@@ -261,9 +265,9 @@ def _rotate_rows(v: NDArray[np.float64], axis: NDArray[np.float64], c: NDArray[n
 
 
 def _orient(spec: PlantSpec, lv: Nodes, size: NDArray[np.float64], rel_height: NDArray[np.float64],
-            rng: np.random.Generator) -> NDArray[np.float64]:
-    """Rotation (N, 3, 3) of every blade: columns are the world directions of leaf x (width),
-    y (base to apex) and z (upper side)."""
+            rng: np.random.Generator) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The rotation of every blade as its three columns, (3, N) each: the world directions of leaf
+    x (width), y (base to apex) and z (upper side)."""
     n = len(size)
     hx, hy = lv.out[:, 0].copy(), lv.out[:, 1].copy()      # the petiole's horizontal direction
     for fallback in (lv.normal, np.array([1.0, 0.0, 0.0])):      # petiole (nearly) vertical
@@ -283,9 +287,17 @@ def _orient(spec: PlantSpec, lv: Nodes, size: NDArray[np.float64], rel_height: N
     # y = cos(elev) h + sin(elev) ẑ with h = (cos yaw, sin yaw, 0); x = h × ẑ = (sin yaw, -cos yaw, 0)
     # (horizontal, x × y = normal up), rolled about y by the third jitter angle: x ⊥ y, so
     # x' = x cos r + (y × x) sin r with y × x = (sin(elev) cos yaw, sin(elev) sin yaw, -cos(elev))
-    y = np.stack([ce * cy, ce * sy, se])
+    y = np.empty((3, n))
+    np.multiply(ce, cy, out=y[0])
+    np.multiply(ce, sy, out=y[1])
+    y[2] = se
     cr, sr = np.cos(jit[:, 2]), np.sin(jit[:, 2])
-    x = np.stack([sy * cr + se * cy * sr, se * sy * sr - cy * cr, -ce * sr])
+    x = np.empty((3, n))
+    np.multiply(sy, cr, out=x[0])
+    x[0] += se * cy * sr
+    np.multiply(se * sy, sr, out=x[1])
+    x[1] -= cy * cr
+    np.multiply(-ce, sr, out=x[2])
     z = _cross_rows(x, y)
     f = spec.light_following
     if f > 0:
@@ -302,7 +314,7 @@ def _orient(spec: PlantSpec, lv: Nodes, size: NDArray[np.float64], rel_height: N
         c, s = np.cos(ang), np.sin(ang)
         x, y = _rotate_rows(x, axis, c, s), _rotate_rows(y, axis, c, s)
         z = _cross_rows(x, y)
-    return np.stack([x, y, z], axis=1).transpose(2, 0, 1)     # (N, component, column)
+    return x, y, z
 
 
 def _blade_low(m: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -339,9 +351,11 @@ def grow_plants(spec: PlantSpec, counts: NDArray[np.int64], scales: NDArray[np.f
     top = np.zeros(p_n)
     np.maximum.at(top, lv.plant, base[:, 2])
     rel = np.clip(base[:, 2] / np.maximum(top[lv.plant], 1e-12), 0.0, 1.0)
-    rot = _orient(spec, lv, size, rel, rng)
+    columns = _orient(spec, lv, size, rel, rng)
     m = np.zeros((n, 4, 4))
-    m[:, :3, :3] = rot * size[:, None, None]
+    for c, col in enumerate(columns):   # scaled straight into the matrices, no (N, 3, 3) temporaries
+        for i in range(3):
+            np.multiply(col[i], size, out=m[:, i, c])
     m[:, :3, 3] = base
     m[:, 3, 3] = 1.0
     low = _blade_low(m)                      # lift blades that would reach below the ground
