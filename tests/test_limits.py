@@ -26,7 +26,7 @@ from leafview.deform.beam import bend_profile
 from leafview.deform.surface import evaluate, grid_uv, normals
 from leafview.errors import NonFiniteMesh
 from leafview.export import export_leaf, export_leaves
-from leafview.scene.camera import check_framable, check_leaf_framable
+from leafview.scene.camera import VIEWS, check_framable, check_leaf_framable, frame_view, frame_views
 from leafview.scene.plants import PLANT_RANGES
 from leafview.scene.spec import SceneSpec, build_scene, load_scene
 
@@ -237,6 +237,23 @@ def test_unframable_leaves_are_named():
     with pytest.raises(ParamError, match="not finite"):
         check_framable(np.array([[0.0, 0.0, 0.0], [np.inf, 0.0, 0.0]]))
     check_leaf_framable(_ovate())
+
+
+@pytest.mark.parametrize("view", VIEWS)
+def test_batched_framing_is_the_framing_of_each_set(view):
+    """frame_views (the thumbnails' framing of a whole chunk) gives each point set exactly the
+    camera frame_view gives it, and refuses an unframable set with frame_view's error."""
+    rng = np.random.default_rng(4)
+    pts = rng.normal(size=(9, 300, 3)) * rng.uniform(0.01, 2.0, size=(9, 1, 3)) + rng.normal(size=(9, 1, 3))
+    for one, many in zip([frame_view(view, p, (96, 64)) for p in pts], frame_views(view, pts, (96, 64))):
+        for a, b in ((one.view, many.view), (one.proj, many.proj), (one.eye, many.eye)):
+            np.testing.assert_array_equal(a, b)
+    pts[5, 7, 1] = np.nan
+    with pytest.raises(ParamError, match="not finite"):
+        frame_views(view, pts, (96, 64))
+    pts[5, 7, 1] = 1e30
+    with pytest.raises(ParamError, match="beyond"):
+        frame_views(view, pts, (96, 64))
 
 
 @pytest.mark.parametrize("suffix", [".ply", ".obj", ".usda", ".glb"])

@@ -72,7 +72,7 @@ from leafview.gpu.targets import unpremultiply
 from leafview.gpu.textures import LeafTextures, check_textures
 from leafview.gpu.vein_draw import VeinDraw
 from leafview.gpu.vein_tubes import VeinTubes
-from leafview.scene.camera import VIEWS, Camera, frame_view
+from leafview.scene.camera import VIEWS, Camera, frame_views
 
 __all__ = ["LeafRenderer", "DEFAULT_GRID", "BATCH", "Lighting", "fill_frame"]
 
@@ -416,9 +416,8 @@ class LeafRenderer:
                 frames[1:] = frames[0]
             else:
                 world = rec.records()[:, :3].reshape(n, nverts, 3)
-                for i in range(n):
-                    fill_frame(frames[i], frame_view(view, world[i].astype(np.float64), (w, h)),
-                               srgb=not linear, flat=flat, size=(w, h))
+                for i, cam in enumerate(frame_views(view, world, (w, h))):
+                    fill_frame(frames[i], cam, srgb=not linear, flat=flat, size=(w, h))
             frame_rows, frame_stride = self._write_records(self._batch_frame, frames)
             colours = self._batch_colour.write(_leaf_colours(records))
             commands = self._batch_commands.write(_draw_commands(n, geometry.triangles * 3, nverts))
