@@ -299,7 +299,17 @@ class _Pygfx:
     def __init__(self, mods: dict[str, ModuleType]) -> None:
         self.gfx, self.wgpu = mods["pygfx"], mods["wgpu"]
         self.version = f"pygfx {self.gfx.__version__}, wgpu {self.wgpu.__version__}"
-        shared = self.gfx.renderers.wgpu.get_shared()   # raises when no adapter works
+        engine = self.gfx.renderers.wgpu
+        if not os.environ.get("PYGFX_WGPU_ADAPTER_NAME"):   # else the adapter the user named to pygfx
+            adapter = self.wgpu.gpu.request_adapter_sync(power_preference="high-performance")   # pygfx's choice
+            if adapter is None:
+                raise RuntimeError("wgpu found no adapter")
+            if "float32-filterable" not in adapter.features:
+                # pygfx asks for it by default (for filtered float textures, which these meshes do
+                # not use); wgpu's OpenGL backend on llvmpipe (no Vulkan driver) does not offer it
+                engine.enable_wgpu_features("!float32-filterable")
+            engine.select_adapter(adapter)
+        shared = engine.get_shared()   # raises when no device can be made
         info = shared.adapter.info
         self.renderer = f"{info.get('device', '?')} ({info.get('backend_type', '?')}, {info.get('adapter_type', '?')})"
         self.device = shared.device
@@ -426,7 +436,10 @@ def _import_peer(peer: str) -> Any:
     try:
         return (_PyVista if peer == "pyvista" else _Pygfx)(mods)
     except Exception as exc:   # no driver, no adapter: reported, not fatal
-        return f"unavailable: {type(exc).__name__}: {exc}"
+        # one line: wgpu's validation errors span several ("Caused by: ..." names the cause)
+        lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+        cause = [line for line in lines[1:] if not line.startswith(("Caused by", "In wgpu"))][:1]
+        return f"unavailable: {type(exc).__name__}: {'; '.join(lines[:1] + cause)}"
 
 
 def _timed(fn: Callable[[], Any]) -> tuple[float, Any]:

@@ -2,10 +2,10 @@
 same leaf meshes through the same camera at the same size, readback included.
 
 Peers (optional: ``pip install 'leafview[peers]'``): **PyVista/VTK** (its default wheel renders
-offscreen through EGL, here on the same llvmpipe as leafview) and **pygfx** (wgpu; on a machine
-without a GPU, Vulkan on Mesa's lavapipe: ``apt-get install mesa-vulkan-drivers``). A peer that
-is missing or cannot start gets rows that say so (``not installed`` / ``unavailable: <reason>``)
-and the run goes on.
+offscreen through EGL, here on the same llvmpipe as leafview) and **pygfx** (wgpu: its Vulkan
+backend where there is a Vulkan driver, e.g. Mesa's lavapipe, else its OpenGL backend, on a
+machine without a GPU the same llvmpipe). A peer that is missing or cannot start gets rows that
+say so (``not installed`` / ``unavailable: <reason>``) and the run goes on.
 
 Rows (see :func:`run` for the keys):
 
@@ -21,7 +21,10 @@ Rows (see :func:`run` for the keys):
   SceneRenderer` with culling and LOD, and without (every leaf at the finest 9×17 grid:
   identical triangles to the peers'), and :class:`~leafview.gpu.instanced.InstancedLeaves` on the
   same grid; each peer draws the same triangles as one merged mesh and as one instanced mesh per
-  species (VTK ``vtkGlyph3DMapper``, pygfx ``InstancedMesh``).
+  species (VTK ``vtkGlyph3DMapper``, pygfx ``InstancedMesh``). The peers shade plain colours, so
+  leafview's rows draw without the species' vein fields (``veins=False``; ``InstancedLeaves``
+  draws none anyway); one more leafview row, without a ratio, draws the no-LOD frame with them,
+  to show what they cost.
 
 The meshes come from leafview's numpy tessellation of the same leaves; every row's image is
 compared with leafview's (``coverage_iou``: intersection over union of the covered pixels), so
@@ -257,6 +260,8 @@ _LV_SCENE_ROWS = {
     "leafview/scene_no_lod": "scene, no culling or LOD (identical triangles)",
     "leafview/instanced": "InstancedLeaves (identical triangles)",
 }
+# leafview rows shown without a ratio (the peers draw nothing like them)
+_LV_REFERENCE_ROWS = {"leafview/scene_no_lod_veins": "scene, no culling or LOD, with veins"}
 _PEER_KINDS = {"merged": "merged mesh", "instanced": "instanced mesh per species"}
 
 
@@ -278,11 +283,14 @@ def _scene_rows(ctx: moderngl.Context, n_leaves: int, rounds: int, peers: dict[s
                 out["rows"][f"{name}/{kind}"] = {"status": _unavailable(exc)}
     times: dict[str, list[float]] = {}
     images: dict[str, np.ndarray] = {}
-    with RenderTarget(ctx, SCENE_SIZE) as target, SceneRenderer(ctx, scene) as sr:
+    # like the peers (and InstancedLeaves), in the species' plain colours; `veined`: with their veins
+    with RenderTarget(ctx, SCENE_SIZE) as target, SceneRenderer(ctx, scene, veins=False) as sr, \
+            SceneRenderer(ctx, scene, resources=sr.resources) as veined:
         _, tables, ripples = species_tables(scene)
         with InstancedLeaves(ctx, pack_scene(scene), SCENE_GRID, jitter_tables=tables, ripple_signals=ripples,
                              resources=sr.resources) as inst:
             sr.set_camera(camera, SCENE_SIZE)
+            veined.set_camera(camera, SCENE_SIZE)
             inst.set_camera(camera)
 
             def lv(draw: Callable[[], None]) -> Callable[[], np.ndarray]:
@@ -296,7 +304,8 @@ def _scene_rows(ctx: moderngl.Context, n_leaves: int, rounds: int, peers: dict[s
 
             mine = {"leafview/scene": lv(lambda: sr.draw(CullSettings())),
                     "leafview/scene_no_lod": lv(lambda: sr.draw(CullSettings(cull=False, lod=False))),
-                    "leafview/instanced": lv(inst.draw)}
+                    "leafview/instanced": lv(inst.draw),
+                    "leafview/scene_no_lod_veins": lv(lambda: veined.draw(CullSettings(cull=False, lod=False)))}
             for key, fn in mine.items():   # warm-up
                 fn()
                 if key == "leafview/scene":
@@ -338,9 +347,11 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
     ``thumbnails`` (``rows`` keyed ``<renderer>/<single|batched>``: ``per_s``,
     ``ms_per_thumbnail``, ``coverage_iou`` against leafview's image (the lowest over the leaves),
     and for peers ``leafview_speedup``; or ``status`` when a peer failed), ``scenes`` (per leaf
-    count: ``rows`` keyed ``leafview/scene``, ``leafview/scene_no_lod``, ``leafview/instanced``,
+    count: ``rows`` keyed ``leafview/scene``, ``leafview/scene_no_lod``, ``leafview/instanced``
+    (without veins, as the peers), ``leafview/scene_no_lod_veins`` (with the species' veins),
     ``<peer>/merged``, ``<peer>/instanced``: ``ms``, ``coverage_iou`` against leafview without
-    LOD, and for peers ``leafview_speedup`` per leafview row), the configuration and versions.
+    LOD, and for peers ``leafview_speedup`` per leafview row but the veined one), the
+    configuration and versions.
     """
     cfg = _CONFIG[bool(quick)]
     t_start = time.perf_counter()
@@ -414,21 +425,23 @@ def format_table(res: dict[str, Any]) -> str:
         lines.append(f"scene: {int(n):,} leaves ({sc['triangles']:,} triangles at {res['scene_grid'][0]}×"
                      f"{res['scene_grid'][1]}), {res['scene_size'][0]}×{res['scene_size'][1]}, {res['scene_view']} "
                      f"camera, no antialiasing, {sc['rounds']} round(s); LOD drew {'/'.join(map(str, sc['leafview_levels']))}")
-        lines.append(f"  {'renderer':<50} {'ms/frame':>9} {'IoU':>6}  leafview ÷ peer: LOD / no LOD / instanced")
-        for key, label in _LV_SCENE_ROWS.items():
-            row = sc["rows"][key]
-            lines.append(f"  {'leafview ' + label:<50} {row['ms']:>9.1f} {row['coverage_iou']:>6.3f}")
+        lines.append(f"  {'renderer':<57} {'ms/frame':>9} {'IoU':>6}  leafview ÷ peer: LOD / no LOD / instanced")
+        for key, label in {**_LV_SCENE_ROWS, **_LV_REFERENCE_ROWS}.items():
+            row = sc["rows"].get(key)
+            if row is None:   # a result of an older leafview
+                continue
+            lines.append(f"  {'leafview ' + label:<57} {row['ms']:>9.1f} {row['coverage_iou']:>6.3f}")
         for name in res["peers"]:
             for kind, what in (("merged", "merged mesh"), ("instanced", "instanced mesh per species")):
                 row = sc["rows"].get(f"{name}/{kind}")
                 label = f"{name} {what}"
                 if row is None:
-                    lines.append(f"  {label:<50} {res['peers'][name]['status']}")
+                    lines.append(f"  {label:<57} {res['peers'][name]['status']}")
                 elif "ms" not in row:
-                    lines.append(f"  {label:<50} {row['status']}")
+                    lines.append(f"  {label:<57} {row['status']}")
                 else:
                     s = row["leafview_speedup"]
-                    lines.append(f"  {label:<50} {row['ms']:>9.1f} {row['coverage_iou']:>6.3f}  "
+                    lines.append(f"  {label:<57} {row['ms']:>9.1f} {row['coverage_iou']:>6.3f}  "
                                  f"{s['scene']:.2f}× / {s['scene_no_lod']:.2f}× / {s['instanced']:.2f}×")
     lines.append(f"(medians over interleaved rounds; IoU: covered pixels shared with leafview's image; "
                  f"{res['cpu_count']} CPUs, {res['seconds']:.0f} s)")
