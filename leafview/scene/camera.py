@@ -169,26 +169,25 @@ def camera_from_intrinsics(k: ArrayLike, world_from_camera: ArrayLike, size: tup
 
 def frame_view(view: str, points: NDArray[np.float64], size: tuple[int, int]) -> Camera:
     """Camera for ``view`` framing ``points`` (world space, (N, 3)) in an image of ``size`` = (w, h)."""
-    if view not in VIEWS:
-        raise ValueError(f"unknown view {view!r} (choose from {', '.join(VIEWS)})")
-    check_framable(points)
-    w, h = size
-    lo, hi = points.min(axis=0), points.max(axis=0)
-    if view == "top":
-        return _top(lo, hi, w, h)
-    az, el = _ORBITS[view]
-    return _orbit(points, lo, hi, w, h, az, el)
+    return frame_views(view, np.asarray(points, dtype=np.float64).reshape(1, -1, 3), size)[0]
 
 
 def frame_views(view: str, points: NDArray[np.floating[Any]], size: tuple[int, int]) -> list[Camera]:
-    """:func:`frame_view` for each of a batch of point sets at once, ``points`` (K, N, 3): the same
-    cameras (each leaf's checks, its distance and aim, vectorised over the batch), for framing a
-    chunk of thumbnails without a Python loop over numpy calls per leaf."""
+    """Cameras for ``view`` framing each of the point sets ``points`` (K, N, 3) in an image of
+    ``size``: each set's checks (:func:`check_framable`), its distance and aim, vectorised over
+    the batch (a chunk of thumbnails is framed without a Python loop over numpy calls per leaf).
+    The orbit camera is as close as it can be with every point inside the central
+    ``ORBIT_FILL`` of the image (tighter than a bounding sphere for long, narrow leaves), aimed at
+    the middle of the projected extent."""
     if view not in VIEWS:
         raise ValueError(f"unknown view {view!r} (choose from {', '.join(VIEWS)})")
     pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 3 or pts.shape[2] != 3 or pts.shape[1] == 0:
-        return [frame_view(view, p.reshape(-1, 3), size) for p in pts]   # the one-set path's errors
+    if pts.ndim != 3 or pts.shape[2] != 3:
+        raise ValueError(f"expected point sets of shape (K, N, 3), got {pts.shape}")
+    if pts.size == 0:
+        for p in pts:
+            check_framable(p)   # raises: nothing to frame
+        return []
     lo, hi = pts.min(axis=1), pts.max(axis=1)
     finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
     reach = np.max(np.maximum(np.abs(lo), np.abs(hi)), axis=1)
@@ -205,7 +204,7 @@ def frame_views(view: str, points: NDArray[np.floating[Any]], size: tuple[int, i
     cam = (pts - center[:, None]) @ basis.T
     x, y, z = cam[..., 0], cam[..., 1], cam[..., 2]
     shift_x, shift_y = np.zeros(len(pts)), np.zeros(len(pts))
-    for _ in range(3):  # as _orbit, for every set at once
+    for _ in range(3):  # distance for the current aim, then re-aim at the projected middle
         xs, ys = x - shift_x[:, None], y - shift_y[:, None]
         dist = np.maximum(np.max(z + np.maximum(np.abs(xs) / tan_x, np.abs(ys) / tan_y), axis=1), 1e-6)
         sx, sy = xs / (dist[:, None] - z), ys / (dist[:, None] - z)
@@ -261,31 +260,6 @@ def _top(lo: NDArray[np.float64], hi: NDArray[np.float64], w: int, h: int) -> Ca
     extent = np.maximum(hi[:2] - lo[:2], 1e-9)
     scale = TOP_FILL * min(w / extent[0], h / extent[1])  # pixels per world unit
     return top_down((lo[:2] + hi[:2]) / 2, hi[2] + 1.0, w / (2 * scale), h / (2 * scale), (hi[2] - lo[2]) + 2.0)
-
-
-def _orbit(points: NDArray[np.float64], lo: NDArray[np.float64], hi: NDArray[np.float64], w: int, h: int,
-           az_deg: float, el_deg: float) -> Camera:
-    """Perspective camera on the orbit (azimuth, elevation) around the leaf, as close as it can
-    be with every vertex inside the central ``ORBIT_FILL`` of the image (tighter than a bounding
-    sphere for long, narrow leaves), aimed at the middle of the projected extent."""
-    basis, tan_x, tan_y = _orbit_axes(az_deg, el_deg, w, h)
-    right, up = basis[0], basis[1]
-    # the points in camera axes once; the aim moves only along right and up, so each step
-    # shifts x and y by a constant and leaves z as it is
-    center = (lo + hi) / 2
-    cam = (points - center) @ basis.T
-    x, y, z = cam[:, 0], cam[:, 1], cam[:, 2]
-    shift_x = shift_y = 0.0
-    for _ in range(3):  # distance for the current aim, then re-aim at the projected middle
-        xs, ys = x - shift_x, y - shift_y
-        dist = max(float(np.max(z + np.maximum(np.abs(xs) / tan_x, np.abs(ys) / tan_y))), 1e-6)
-        sx, sy = xs / (dist - z), ys / (dist - z)
-        shift_x += dist * (sx.max() + sx.min()) / 2
-        shift_y += dist * (sy.max() + sy.min()) / 2
-    xs, ys = x - shift_x, y - shift_y
-    dist = max(float(np.max(z + np.maximum(np.abs(xs) / tan_x, np.abs(ys) / tan_y))), 1e-6)
-    center = center + right * shift_x + up * shift_y
-    return _orbit_camera(center, basis[2], dist, float(np.abs(z).max()), w, h)
 
 
 def _orbit_axes(az_deg: float, el_deg: float, w: int, h: int) -> tuple[NDArray[np.float64], float, float]:
