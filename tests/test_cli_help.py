@@ -98,9 +98,13 @@ def test_unknown_command_exits_2(capsys):
 
 
 def test_scene_command_does_not_load_the_photo_fit():
-    """``leafview scene`` imports the scene viewer (for ``--view``), whose photo reference loads
-    the photo fit (scipy, scikit-image: about a second) only when a photo is opened."""
-    code = "import sys, leafview.cli.scene; print(sorted(m for m in ('leafview.fit', 'skimage') if m in sys.modules))"
+    """``leafview scene`` loads neither the photo fit (scipy, scikit-image: about a second; the
+    scene viewer is imported only for ``--view``) nor the thumbnails' sheets with the lobe-outline
+    fit (``scipy.optimize``, ``scipy.interpolate``: about 0.2 s), which its ``--views`` options
+    (:mod:`leafview.cli.views`) do not need."""
+    unwanted = ("leafview.fit", "skimage", "leafview.app.scene_view", "leafview.gpu.sheets",
+                "leafview.botany.outline_fit", "scipy.optimize", "scipy.interpolate")
+    code = f"import sys, leafview.cli.scene; print(sorted(m for m in {unwanted!r} if m in sys.modules))"
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stderr[-3000:]
     assert result.stdout.strip() == "[]", result.stdout

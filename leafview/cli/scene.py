@@ -15,8 +15,8 @@ Examples::
     leafview scene --leaves 40 --layout plant --views 8 --depth-noise 0.005 --holes -o views/
 
 ``--views N -o DIR`` writes synthetic RGB-D views with exact ground truth instead of one picture
-(:mod:`leafview.export.views`; the options are shared with ``leafview render``); it goes with
-none of the other outputs. The noise is seeded with the scene's ``--seed``.
+(:mod:`leafview.export.views`; the options, :mod:`leafview.cli.views`, are shared with ``leafview
+render``); it goes with none of the other outputs. The noise is seeded with the scene's ``--seed``.
 """
 
 from __future__ import annotations
@@ -41,7 +41,6 @@ from leafview.cli.args import (
     refuse_directory,
     veins_off,
 )
-from leafview.cli.render import add_views_arguments, check_views_arguments, write_views
 from leafview.cli.scene_anim import (
     add_wind_arguments,
     animation_times,
@@ -50,6 +49,7 @@ from leafview.cli.scene_anim import (
     write_animation,
 )
 from leafview.cli.scene_look import add_light_arguments, light_from_args
+from leafview.cli.views import add_views_arguments, check_views_arguments, write_views
 from leafview.core.compact import is_compact
 from leafview.core.io import leaves_from_document, read_document, save_leaves
 from leafview.core.limits import MAX_PLANTS, MAX_VIEW_FRAMES
@@ -62,7 +62,7 @@ from leafview.gpu import default_renderer
 from leafview.gpu.canopy import CanopyRenderer
 from leafview.gpu.scene import LOD_GRIDS, CullSettings, SceneRenderer
 from leafview.resources import builtin_presets, resolve_preset
-from leafview.scene.camera import SCENE_VIEWS, scene_camera
+from leafview.scene.camera import SCENE_VIEWS, box_camera
 from leafview.scene.spec import (
     LAYOUTS,
     MAX_LEAVES,
@@ -301,7 +301,7 @@ def _write_outputs(args: argparse.Namespace, scene: Scene, saved: Scene, spec: S
             renderer = SceneRenderer(ctx, scene, progress=bar.update)
         finally:
             bar.close()
-        camera = scene_camera(scene, args.size, args.camera)
+        camera = box_camera(*renderer.bounds, args.size, args.camera)   # Scene.bounds once, not twice
         animation = args.frames is not None and not args.view
         try:
             t_upload = time.perf_counter() - t1

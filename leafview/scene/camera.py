@@ -297,9 +297,16 @@ def scene_camera(scene: Bounded, size: tuple[int, int], view: str = "three-quart
     """A camera for ``view``: the standard views frame the scene's bounding box; ``ground`` stands
     at the edge of the scene at 60 % of its height, looking across it (a walker's view, where
     leaves span from a few pixels to the whole image)."""
+    lo, hi = scene.bounds()
+    return box_camera(lo, hi, size, view)
+
+
+def box_camera(lo: NDArray[np.float64], hi: NDArray[np.float64], size: tuple[int, int],
+               view: str = "three-quarter") -> Camera:
+    """:func:`scene_camera` for a world box (``lo``, ``hi``) already computed, such as a scene
+    renderer's ``bounds``."""
     if view not in SCENE_VIEWS:
         raise ValueError(f"unknown view {view!r} (choose from {', '.join(SCENE_VIEWS)})")
-    lo, hi = scene.bounds()
     if view != "ground":
         corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
         return frame_view(view, corners, size)
