@@ -31,6 +31,7 @@
 // becomes a one-pixel ramp around 0.5 (fwidth) written as the sample mask instead of a discard.
 #include "generated/frame_block.glsl"
 #include "color.glsl"
+#include "leaf_srgb.glsl"
 
 in vec3 v_world;
 in vec3 v_normal;
@@ -82,14 +83,39 @@ float spec_lobe(float c, int lobe) {
     return lobe == 0 ? c32 * c8 : (lobe == 1 ? (c32 * c16) * (c8 * c4) : c8);
 }
 
-vec3 light_term(vec3 n, vec3 view_dir, vec4 light, vec3 albedo, float translucency, float sheen, int lobe) {
-    vec3 l = normalize(light.xyz);
-    float diffuse = max(dot(n, l), 0.0);
-    float through = translucency * max(dot(-n, l), 0.0);
-    vec3 h = normalize(l + view_dir);
-    float spec = sheen * spec_lobe(max(dot(n, h), 0.0), lobe) * step(0.0, dot(n, l));
-    return light.w * ((diffuse + through) * albedo + vec3(spec));
+// spec_lobe of c from its square c2 = c² (key_fill: no square root)
+float spec_lobe_sq(float c2, int lobe) {
+    float c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8, c32 = c16 * c16;
+    return lobe == 0 ? c32 * c8 : (lobe == 1 ? (c32 * c16) * (c8 * c4) : c8);
 }
+
+// The direction towards a light of the Frame block, a unit vector as fill_frame writes it
+// (leafview/gpu/frame.py): normalising it here would cost a square root and a division for every
+// fragment on llvmpipe, which does not hoist work on uniforms out of the fragment loop.
+#define LIGHT_DIR(light) ((light).xyz)
+
+// The key and the fill light: each light's diffuse reflection and transmission, and the key's
+// specular lobe (the sheen; the fill light has none). N, the visible side's normal, and V, the
+// vector towards the eye, need not be unit: the lengths are divided out here with two square
+// roots and one division a fragment, where normalize(N), normalize(V) and the half vector's
+// normalize(l + v) took three of each; on llvmpipe a square root and a division are the slowest
+// instructions of this shader (docs/benchmarks.md). With n = N/|N|, v = V/|V| and unit l:
+// |l + v|² = 2 (1 + l·v), so n·h = (|V| n·l + n·V) / sqrt(den) with den = 2 |V| (|V| + l·V), and
+// the lobe takes (n·h)² = (max(n·h, 0))² = num²/den: the same Blinn-Phong term, no second root.
+vec3 key_fill(vec3 N, vec3 V, vec3 albedo, float translucency, float sheen, int lobe) {
+    vec3 lk = LIGHT_DIR(frame.key), lf = LIGHT_DIR(frame.fill);
+    float sn = sqrt(dot(N, N)), sv = sqrt(dot(V, V));
+    float den = max(2.0 * sv * (sv + dot(lk, V)), 1e-30);   // |V|² |l + v|²
+    float inv = 1.0 / (sn * sv * den);
+    float inv_n = inv * (sv * den);                           // 1 / |N|
+    float ndk = dot(N, lk) * inv_n, ndf = dot(N, lf) * inv_n;
+    float num = max(ndk * sv + dot(N, V) * inv_n, 0.0);      // sqrt(den) · max(n·h, 0)
+    float spec = sheen * spec_lobe_sq(num * num * (inv * (sn * sv)), lobe) * step(0.0, ndk);
+    vec3 key = frame.key.w * ((max(ndk, 0.0) + translucency * max(-ndk, 0.0)) * albedo + vec3(spec));
+    return key + frame.fill.w * ((max(ndf, 0.0) + translucency * max(-ndf, 0.0)) * albedo);
+}
+
+const float RIB_SCALE = 1.0 / (0.035 - 0.012);   // the midrib band's smoothstep edges
 
 // The albedo of the visible side; false where a textured leaf's image is transparent (alpha < 0.5).
 // `textured`: the albedo is an image's; `veined`: no midrib band (the vein field draws the veins).
@@ -113,7 +139,10 @@ bool leaf_albedo(out vec3 albedo, out bool textured, bool veined) {
     albedo = front ? v_front.rgb : v_back;
     if (veined) return true;
     // midrib (a lobed leaf: its skeleton): a narrow lighter band, fading toward the apex
-    float rib = (1.0 - smoothstep(0.012, 0.035, v_rib.x)) * (1.0 - 0.6 * v_rib.y);
+    // smoothstep(0.012, 0.035, x) written out with a multiplication: the built-in divides by
+    // (0.035 - 0.012) for every fragment, and a division is among llvmpipe's slowest instructions
+    float t = clamp((v_rib.x - 0.012) * RIB_SCALE, 0.0, 1.0);
+    float rib = (1.0 - t * t * (3.0 - 2.0 * t)) * (1.0 - 0.6 * v_rib.y);
     albedo = mix(albedo, albedo * 1.35 + vec3(0.05), 0.6 * rib);
     return true;
 }
@@ -246,9 +275,10 @@ void main() {
     }
 #endif
 
-    // one normalize: llvmpipe evaluates both arms of a ?: (and normalize(-x) is -normalize(x))
-    vec3 view_dir = normalize(frame.eye.w > 0.5 ? frame.eye.xyz - v_world : -frame.eye.xyz);
+    // towards the eye, not unit (llvmpipe evaluates both arms of a ?:)
+    vec3 view = frame.eye.w > 0.5 ? frame.eye.xyz - v_world : -frame.eye.xyz;
 #ifdef LEAF_CANOPY
+    vec3 view_dir = normalize(view);
 #ifdef LEAF_STEMS
     sheen = 0.02;   // bark: a faint broad sheen
     lobe = 2;
@@ -260,10 +290,14 @@ void main() {
     if (frame.flags.y != 0) {
         color = albedo;
     } else {
-        color += light_term(n, view_dir, frame.key, albedo, translucency, sheen, lobe);
-        color += light_term(n, view_dir, frame.fill, albedo, translucency, 0.0, lobe);
+#ifdef LEAF_NO_VEINS
+        // the interpolated normal as it is: key_fill divides by its length (no normalize)
+        color += key_fill(v_normal * (front ? 1.0 : -1.0), view, albedo, translucency, sheen, lobe);
+#else
+        color += key_fill(n, view, albedo, translucency, sheen, lobe);
+#endif
     }
-    frag_color = vec4(frame.flags.x != 0 ? linear_to_srgb(color) : color, 1.0);
+    frag_color = vec4(frame.flags.x != 0 ? leaf_srgb(color) : color, 1.0);
 #endif
 }
 #endif

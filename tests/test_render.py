@@ -106,7 +106,12 @@ def test_same_params_same_pixels_and_world_transform_does_not_move_top_view(gl, 
     b = gl.render(p, (96, 96), "three-quarter")
     np.testing.assert_array_equal(a, b)
     moved = p.replace(transform=Transform(translation=(3.0, -2.0, 1.0)))
-    np.testing.assert_array_equal(gl.render(p, (96, 96), "top"), gl.render(moved, (96, 96), "top"))
+    here, there = gl.render(p, (96, 96), "top"), gl.render(moved, (96, 96), "top")
+    np.testing.assert_array_equal(here[..., 3], there[..., 3])   # the same pixels covered: nothing moved
+    # the shading's world positions round differently once translated (linear colours differ by up
+    # to 5e-6), which moves a colour lying on an 8-bit step by one code on a pixel or two
+    diff = np.abs(here.astype(np.int16) - there)
+    assert diff.max() <= 1 and (diff > 0).any(axis=-1).sum() <= 3
 
 
 def test_module_level_render_and_errors(gl, presets):

@@ -12,7 +12,7 @@ import numpy as np
 from leafview.gpu.layout import FRAME_BINDING, FRAME_BLOCK
 from leafview.scene.camera import Camera
 
-__all__ = ["Lighting", "fill_frame", "FrameUniforms"]
+__all__ = ["Lighting", "fill_frame", "unit_lights", "FrameUniforms"]
 
 
 class Lighting:
@@ -33,8 +33,17 @@ def fill_frame(record: np.ndarray, camera: Camera, *, srgb: bool, flat: bool = F
     record["eye"] = camera.eye
     record["key"] = lighting.key
     record["fill"] = lighting.fill
+    unit_lights(record)   # leaf.frag takes the directions as they are: no normalize per fragment
     record["ambient"][:3] = lighting.ambient
     record["flags"] = (int(srgb), int(flat), 0 if size is None else int(size[1]), 0)
+
+
+def unit_lights(frames: np.ndarray) -> None:
+    """Normalise the key and fill lights' directions of FRAME_BLOCK records in place (their
+    strengths, the w components, unchanged; a zero direction stays zero)."""
+    for name in ("key", "fill"):
+        d = frames[name][..., :3].astype(np.float64)
+        frames[name][..., :3] = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-30)
 
 
 class FrameUniforms:

@@ -391,8 +391,11 @@ class LeafRenderer:
         if keys:
             self.ripples.update(keys)  # one batched dispatch for every signal that changed
         leaf_rows, leaf_stride = self._write_records(self._batch_leaf, records)
-        for i in range(n):  # rows sit at the uniform-offset alignment: one small dispatch each
-            self.prepare.run(leaf_rows, 1, offset=i * leaf_stride)
+        if leaf_stride == LEAF_BLOCK.nbytes:   # tightly packed (llvmpipe: a 16-byte alignment): one dispatch
+            self.prepare.run(leaf_rows, n)
+        else:   # rows sit at the uniform-offset alignment: one small dispatch each
+            for i in range(n):
+                self.prepare.run(leaf_rows, 1, offset=i * leaf_stride)
         # the shader permutation without the features no leaf of this chunk uses
         veins = vein_defines(records)
         program = self.resources.leaf_program({**feature_defines(records), **veins, **lobe_defines(records)},
@@ -431,7 +434,8 @@ class LeafRenderer:
             target.clear(bg)
             self.ctx.enable_only(moderngl.DEPTH_TEST)
             baked = self.resources.programs.program("leaf_baked.vert", "leaf.frag",
-                                                    defines={**texture_defines(records), **veins, "LEAF_BAKED_RIB": 1})
+                                                    defines={**texture_defines(records), **veins,
+                                                             "LEAF_BAKED_RIB": 1})
             fmt, names = _colour_format(baked)
             vao = self.ctx.vertex_array(
                 baked,
