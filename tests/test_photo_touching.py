@@ -2,8 +2,10 @@
 widely) are refused: where the region parts between two notches into two convex blades
 (:func:`leafview.fit.photo_shape.two_blades`), where the region looks lobed but is not
 mirror-symmetric (:data:`leafview.fit.photo_lobed.LOBED_MIN_MIRROR`), or where no single leaf's
-outline follows it (:data:`leafview.fit.photo.TOUCHING_FIT_ERROR`). Single leaves, asymmetric ones judged by their
-halves even when halves are off, and lobed leaves are not refused."""
+outline follows it (:data:`leafview.fit.photo.TOUCHING_FIT_ERROR`). A pair whose second leaf is too dark or
+olive to be traced is refused where a region unlike the paper, a quarter of the leaf's area and
+thick, lies against the traced one (:data:`leafview.fit.photo_outline.UNLIKE_SHARE`). Single leaves,
+asymmetric ones judged by their halves even when halves are off, and lobed leaves are not refused."""
 
 from __future__ import annotations
 
@@ -17,7 +19,9 @@ from leafview.cli import main
 from leafview.errors import ParamError
 from leafview.fit import fit_image
 from leafview.fit.photo import TOUCHING_FIT_ERROR
+from leafview.fit.photo_io import as_photo
 from leafview.fit.photo_lobed import LOBED_MIN_MIRROR, NOTCHED_MIN_MIRROR, lobe_measures, symmetry_axis, two_notches
+from leafview.fit.photo_outline import UNLIKE_SHARE, UNLIKE_THICK, WORK_PIXELS, _downscale, _segment, _unlike_paper
 from leafview.fit.photo_shape import BLADES_SINUS, BLADES_SOLIDITY, two_blades
 from leafview.fit.synthetic_photos import synthetic_photo, write_photo
 
@@ -49,6 +53,27 @@ def test_a_touching_pair_without_a_neck_exits_2_and_writes_nothing(seed, tmp_pat
     assert "\n" not in err and err.startswith("leafview fit: error: ") and str(path) in err, err
     assert "two touching leaves?" in err and "narrow neck" not in err and why in err, err
     assert not out.exists()
+
+
+# pairs whose second leaf (olive or dark) is below the threshold: one leaf was traced and fitted
+# before (measured 2026-12-03 at 600 × 600)
+UNTRACED = [6, 50, 58]
+
+
+@pytest.mark.parametrize("seed", UNTRACED)
+def test_a_pair_whose_second_leaf_is_not_traced_is_refused(seed) -> None:
+    sp = synthetic_photo(seed, size=(600, 600), touching=True)
+    with pytest.raises(ParamError, match="two touching leaves\\? a region of .* unlike the paper"):
+        fit_image(sp.image, texture_size=16)
+
+
+@pytest.mark.parametrize(("seed", "size", "options"), SINGLES + [(153, (700, 900), {}), (113, (900, 600), {})])
+def test_beside_a_single_leaf_little_is_unlike_the_paper(seed, size, options) -> None:
+    # 153 and 113 are the single leaves of the sweeps with the most (their shadows' and tips' fringes)
+    photo = as_photo(synthetic_photo(seed, size=size, **options).image)
+    work = _downscale(photo.rgb, max(1, round(float(np.sqrt(photo.rgb.shape[0] * photo.rgb.shape[1] / WORK_PIXELS)))))
+    share, thick = _unlike_paper(work, _segment(work, ""))
+    assert share < 0.5 * UNLIKE_SHARE and thick < UNLIKE_THICK, (share, thick)
 
 
 @pytest.mark.parametrize(("seed", "size", "options"), SINGLES)

@@ -25,8 +25,13 @@ Steps, all in :func:`leaf_outline`:
    closing: the 3 × 3 box mean already quiets the noise, and either would eat thin petioles and
    sharp tips or fill narrow sinuses.
    A petiole paler than the blade is added back by a hysteresis (:func:`_segment`).
-4. **One leaf, not two** (:func:`leafview.fit.photo_shape.split_shares`).
-5. **Petiole, base, apex, outline** (:func:`leafview.fit.photo_shape.leaf_shape`).
+4. **One leaf, not two** (:func:`leafview.fit.photo_shape.split_shares`), and no second leaf too
+   dark or olive to be traced lying against it (:func:`_unlike_paper`: a region whose chroma is
+   not the paper's, at least :data:`UNLIKE_SHARE` of the leaf's area and :data:`UNLIKE_THICK` of
+   its thickness).
+5. **Petiole, base, apex, outline** (:func:`leafview.fit.photo_shape.leaf_shape`); the apex then
+   followed on along a tip's faint trace, below the threshold but above the paper's noise
+   (:func:`_faint_tip`).
 
 A leaf touching the image border is fitted as it shows, with a warning naming the side.
 Errors are :class:`~leafview.errors.ParamError` naming the file (or ``image`` for an array).
@@ -46,7 +51,7 @@ from skimage.filters import threshold_otsu
 from leafview.core.colour import srgb_to_linear
 from leafview.errors import ParamError
 from leafview.fit.photo_io import Photo, as_photo, read_photo
-from leafview.fit.photo_shape import Shape, leaf_shape, split_shares
+from leafview.fit.photo_shape import TIP_MAX, Shape, leaf_shape, split_shares
 
 __all__ = ["LeafOutline", "leaf_outline", "Photo", "read_photo", "as_photo", "greenness", "WORK_PIXELS"]
 
@@ -54,13 +59,21 @@ WORK_PIXELS = 300_000          # segmentation resolution (pixels) for larger pho
 MIN_LEAF_FRACTION = 0.002      # the leaf covers at least this share of the image
 HOLE_FRACTION = 0.001          # holes smaller than this share of the leaf are filled
 TWO_LEAVES_SHARE = 0.25        # a second part of at least this share of the leaf means two leaves
+UNLIKE_PAPER = 8.0             # CIELAB chroma distance (a*, b*) from the paper's median that is not paper, at least ...
+UNLIKE_SPREAD = 5.0            # ... and this many times the paper's median distance from it
+UNLIKE_SHARE = 0.25            # a region unlike the paper touching the leaf, of this share of its area, ...
+UNLIKE_THICK = 0.35            # ... and this thick (its largest inscribed radius / the leaf's): a second leaf
 MIN_GREEN = {"exg": 0.05, "lab-a": 0.05}   # leaf class mean: excess green, or -a*/100
 MIN_SEPARATION = 5.0           # leaf class mean above the paper's, in standard deviations of the paper
 MAX_BORDER_SHARE = 0.5         # the leaf class covers less than this share of the image border
 LOW_FRACTION = 0.3             # pale thin parts (petioles): at least this share of the way from the paper to Otsu's
 PALE_REACH = 0.3               # pale parts are looked for this far (of the blade's size) beyond its box
+FAINT_FRACTION = 0.05          # a faint tip's trace: at least this share of the way from the paper to Otsu's
+FAINT_RUN = 3                  # ... followed for at least this many working pixels (more than an edge's blur)
+FAINT_THIN, FAINT_THIN_AT = 8.0, 0.02   # ... beyond a tip at most this many working pixels wide this far (of the length) behind it
 _MIN_THIN_PIXELS = 6           # a pale part beyond the blade's edge has at least this many working pixels
 _SAMPLE_PIXELS = 40_000        # pixels used to choose the channel and its threshold
+_UNLIKE_PIXELS = 25_000        # pixels (about) in which a region unlike the paper is looked for
 _CROSS = ndimage.generate_binary_structure(2, 1)
 _EIGHT = ndimage.generate_binary_structure(2, 2)
 
@@ -163,6 +176,7 @@ class _Channels:
     channel: str                 # the channel the blade is thresholded in
     threshold: float             # its Otsu threshold
     pale: dict[str, float]       # channel -> threshold for pale thin parts, for channels whose paper is quiet
+    faint: float = 0.0           # the chosen channel just above the paper's noise (a faint tip's trace)
 
 
 def _choose_channel(work: NDArray[np.float32], source: str) -> _Channels:
@@ -201,13 +215,16 @@ def _choose_channel(work: NDArray[np.float32], source: str) -> _Channels:
     t = 0.5 * (float(np.median(values[channel][~paper])) + float(np.median(values[channel][paper])))
     paper = values[channel] <= t
     pale: dict[str, float] = {}
+    faint = t
     for name, g in values.items():
         q50, q95 = (float(q) for q in np.percentile(g[paper], [50, 95]))
         floor = LOW_FRACTION * (t - q50) if name == channel else 0.5 * MIN_GREEN[name]
         low = max(q95 + 2 * (q95 - q50), q50 + floor)
         if name == channel or float((g[border] > low).mean()) < 0.02:
             pale[name] = min(low, t) if name == channel else low
-    return _Channels(channel, t, pale)
+        if name == channel:
+            faint = min(max(q95 + 2 * (q95 - q50), q50 + FAINT_FRACTION * (t - q50)), t)
+    return _Channels(channel, t, pale, faint)
 
 
 def _no_leaf(source: str, why: str) -> ParamError:
@@ -306,6 +323,111 @@ def _segment(work: NDArray[np.float32], source: str) -> _Segmentation:
     return _Segmentation(ch, core[r0:r1, c0:c1], pale[r0:r1, c0:c1], (y0 + r0, x0 + c0))
 
 
+def _chroma(rgb: NDArray[np.float32]) -> NDArray[np.float32]:
+    """CIELAB (a*, b*) (D65 white) of sRGB pixels (..., 3) in [0, 1], as (..., 2)."""
+    lin = _LINEAR[np.clip(rgb * 4095 + 0.5, 0, 4095).astype(np.int32)]
+    r, g, b = lin[..., 0], lin[..., 1], lin[..., 2]
+    fx = _lab_f((0.4124564 * r + 0.3575761 * g + 0.1804375 * b) * np.float32(1 / 0.95047))
+    fy = _lab_f(0.2126729 * r + 0.7151522 * g + 0.0721750 * b)
+    fz = _lab_f((0.0193339 * r + 0.1191920 * g + 0.9503041 * b) * np.float32(1 / 1.08883))
+    return np.stack([500 * (fx - fy), 200 * (fy - fz)], axis=-1).astype(np.float32)
+
+
+def _unlike_paper(work: NDArray[np.float32], seg: _Segmentation) -> tuple[float, float]:
+    """The largest region beside the leaf whose colour is not the paper's (a second leaf too dark
+    or too olive for the leaf's threshold): (its area / the leaf's, its largest inscribed radius /
+    the leaf's), or (0, 0). Looked for within :data:`PALE_REACH` of the leaf's size around its box,
+    on 3 × 3 box means: a pixel is unlike the paper where its chroma (CIELAB a*, b*) lies more than
+    :data:`UNLIKE_PAPER` and :data:`UNLIKE_SPREAD` times the paper's median spread from the paper's
+    median chroma (shadows darken the paper but keep its chroma), the paper being what lies more
+    than 6 pixels from the leaf. The leaf's own pixels (with the holes it encloses) and a 2-pixel
+    ring round it (one more per k) are left out; the region must reach that ring. Every k-th row
+    and column of the window is looked at (about :data:`_UNLIKE_PIXELS` pixels in all)."""
+    core = seg.crop
+    cy, cx = seg.corner
+    reach = int(PALE_REACH * max(core.shape)) + 2
+    y0, x0 = max(cy - reach, 0), max(cx - reach, 0)
+    win = work[y0:cy + core.shape[0] + reach, x0:cx + core.shape[1] + reach]
+    leaf = np.zeros(win.shape[:2], bool)
+    leaf[cy - y0:cy - y0 + core.shape[0], cx - x0:cx - x0 + core.shape[1]] = core
+    k = max(1, round(math.sqrt(leaf.size / _UNLIKE_PIXELS)))     # every k-th pixel is enough for a leaf-sized region
+    win, leaf = win[::k, ::k], ndimage.binary_fill_holes(leaf[::k, ::k])
+    away = ndimage.distance_transform_edt(~leaf) * k
+    near, paper = away <= 1.5 + k, away > 6
+    if not paper.any():
+        return 0.0, 0.0
+    chroma = _chroma(ndimage.uniform_filter(win, (3, 3, 1), mode="nearest"))
+    d = np.hypot(*(chroma - np.median(chroma[paper], axis=0)).transpose(2, 0, 1))
+    other = (d > max(UNLIKE_PAPER, UNLIKE_SPREAD * float(np.median(d[paper])))) & ~near
+    lab, n = ndimage.label(other, structure=_EIGHT)
+    touch = np.unique(lab[(away <= 1.5 + 3 * k) & other])
+    touch = touch[touch > 0]
+    if not len(touch):
+        return 0.0, 0.0
+    sizes = np.bincount(lab.ravel())
+    j = int(touch[np.argmax(sizes[touch])])
+    share = float(sizes[j]) / float(leaf.sum())
+    if share < UNLIKE_SHARE:
+        return share, 0.0
+    inner = float(ndimage.distance_transform_edt(np.pad(leaf, 1))[1:-1, 1:-1].max())
+    return share, float(ndimage.distance_transform_edt(np.pad(lab == j, 1))[1:-1, 1:-1].max()) / max(inner, 1.0)
+
+
+def _faint_tip(photo: Photo, ch: _Channels, f: int, apex: NDArray[np.float64], outline: NDArray[np.float64],
+               base: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The apex moved on along a tip's faint trace beyond it: the thin end of an acuminate or drip
+    tip, below the threshold but above the paper's noise (:data:`FAINT_FRACTION`). From the apex, in
+    the direction from the outline's points within 3 % of the length of it, the greenness (box
+    means over 3 working pixels, as the threshold's) is followed one pixel a step along its ridge
+    (the best of five offsets up to half a pixel across, the direction turning slowly towards it)
+    while it stays above that level and below the threshold (not back into the blade), goes on
+    away from ``base``, and keeps leaving the outline (at least 0.7 pixels from it per step: not
+    along the blur of a blunt apex's edge), for at most
+    :data:`~leafview.fit.photo_shape.TIP_MAX` of the length. A run shorter than :data:`FAINT_RUN`
+    working pixels is the edge's blur: the apex stays. Only a thin tip is followed, at most
+    :data:`FAINT_THIN` working pixels wide :data:`FAINT_THIN_AT` of the length behind the apex
+    (wider tips end where they show; followed, their blur and shadows took the single leaves of a
+    sweep with both ends within 2 % from 150 to 144 of 232)."""
+    length = float(np.hypot(*(apex - base)))
+    near = outline[np.hypot(*(outline - apex).T) <= 0.03 * length]
+    if len(near) < 3 or not length > 0:
+        return apex
+    d = apex - near.mean(axis=0)
+    ahead = (apex - base) / length
+    rel = outline - apex
+    along, side = rel @ ahead, rel @ np.array([-ahead[1], ahead[0]])
+    band = np.abs(along + FAINT_THIN_AT * length) <= 2.0
+    if not float(d @ ahead) > 0 or band.sum() < 2 or float(np.ptp(side[band])) > FAINT_THIN * f:
+        return apex                                 # not a thin tip: its end shows
+    d = d / float(np.hypot(*d))
+    reach = int(TIP_MAX * length)
+    r = reach + 3 * f + 2
+    y0, x0 = max(int(apex[1]) - r, 0), max(int(apex[0]) - r, 0)
+    win = photo.rgb[y0:int(apex[1]) + r + 1, x0:int(apex[0]) + r + 1]
+    if win.shape[0] < 3 or win.shape[1] < 3:
+        return apex
+    g = ndimage.uniform_filter(greenness(win, ch.channel), 3 * f, mode="nearest")
+    p = apex - (x0, y0)
+    ring = outline - (x0, y0)
+    across = np.linspace(-0.5, 0.5, 5)
+    run = 0
+    for _ in range(reach):
+        n = np.array([-d[1], d[0]])
+        q = p + d + across[:, None] * n
+        v = ndimage.map_coordinates(g, [q[:, 1], q[:, 0]], order=1, mode="nearest")
+        k = int(np.argmax(v))
+        if (not ch.faint < v[k] < ch.threshold or float((q[k] - p) @ ahead) <= 0
+                or float(np.min(np.hypot(*(ring - q[k]).T))) < 0.7 * (run + 1)):
+            break                                   # the paper or the blade, or along the edge's blur instead of away
+        step = q[k] - p
+        d = 0.8 * d + 0.2 * step / float(np.hypot(*step))
+        d = d / float(np.hypot(*d))
+        p, run = q[k], run + 1
+    if run < FAINT_RUN * f:
+        return apex
+    return np.asarray(p + (x0, y0), np.float64)
+
+
 def _band_greenness(rgb: NDArray[np.float32], rows: NDArray[np.intp], cols: NDArray[np.intp],
                     channel: str) -> NDArray[np.float32]:
     """The 3 × 3 box mean of the photo around each pixel (rows, cols), as greenness."""
@@ -390,6 +512,12 @@ def leaf_outline(photo: Photo | Any, *, base: ArrayLike | None = None, apex: Arr
                          f"two touching leaves found: the leaf-coloured region parts at a narrow neck into pieces of "
                          f"{shares[0]:.0%} and {shares[1]:.0%} of it; photograph one leaf at a time, apart from others",
                          source or None)
+    other, thick = _unlike_paper(work, seg)
+    if other >= UNLIKE_SHARE and thick >= UNLIKE_THICK:
+        raise ParamError("" if source else "image",
+                         f"two touching leaves? a region of {other:.0%} of the leaf's area, unlike the paper but not "
+                         f"green enough to be traced, lies against it (a second, darker or olive leaf?); photograph "
+                         f"one leaf at a time, apart from others", source or None)
     fine, (y0, x0) = _fine_crop(photo, f, seg)
     corner = np.array([x0, y0], np.float64)
 
@@ -406,9 +534,13 @@ def leaf_outline(photo: Photo | Any, *, base: ArrayLike | None = None, apex: Arr
     window = np.s_[y0:y0 + fine.shape[0], x0:x0 + fine.shape[1]]
     mask[window], blade[window] = fine, shape.blade
     sides, notes = _cut_sides(mask, blade)
+    outline, found_base = to_full(shape.outline), to_full(shape.base)
+    found_apex = to_full(shape.apex)
+    if apex_px is None:
+        found_apex = _faint_tip(photo, seg.channels, f, found_apex, outline, found_base)
     return LeafOutline(
-        mask=mask, blade=blade, outline=to_full(shape.outline),
-        base=base_px if base_px is not None else to_full(shape.base),
-        apex=apex_px if apex_px is not None else to_full(shape.apex),
+        mask=mask, blade=blade, outline=outline,
+        base=base_px if base_px is not None else found_base,
+        apex=apex_px if apex_px is not None else found_apex,
         petiole=to_full(shape.petiole), cut_sides=sides, method=f"{seg.channels.channel}-otsu",
         warnings=tuple(notes) + shape.warnings)

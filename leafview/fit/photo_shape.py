@@ -65,9 +65,10 @@
   middle), with a warning.
   The base itself is the notch's sinus; else the outline point farthest from the apex, unless that
   lies more than :data:`SHOULDER` of the width off the axis (a shoulder of a truncate base), where
-  the axis' crossing is used; a pointed base is followed on along its taper as the apex is
-  (:func:`_taper_tip`). A nearly round blade (principal axes within 15 %) gets a warning:
-  its axis, so its ends, are a guess.
+  the axis' crossing is used; a petiole stub too short to be found as a petiole is walked back
+  to where the blade widens it (:func:`_stub_root`); a pointed base is followed on along its
+  taper as the apex is (:func:`_taper_tip`). A nearly round blade (principal axes within 15 %)
+  gets a warning: its axis, so its ends, are a guess.
 * **Apex** (:func:`_midrib_end`): the midrib's end, seen from the base along the line through the
   blade's centroid (the principal axis misleads on a blade wider than long). Where that line
   leaves the outline in a notch (an emarginate or two-lobed apex) it is the notch's sinus; else
@@ -127,6 +128,10 @@ TIP_BLUR = 3.0               # working pixels: narrower parts of the tip are not
 TIP_SLOPE = 0.8              # a tip widening faster than this (width per length) is blunt: it stays
 TIP_MIN_SLOPE = 0.15         # ... and one widening slower is a stalk (a short petiole, a drip tip): it stays too
 TIP_MAX = 0.04               # the tip moves on at most this (of the length)
+STUB_MAX = 0.05              # a stub (a petiole too short to be found as one) is at most this long (of the length)
+STUB_WIDTH = 0.08            # ... and at most this wide (of the blade's widest width)
+STUB_MIN = 2.0               # ... running at least this many of its widths before the blade widens it past twice that
+STUB_GROWTH = 0.3            # ... and growing along them less than this of the blade's growth just past it
 VEIN_SENSE = 0.03             # |vein sense| from which the veins tell the apex's end
 VEIN_TURN = 2.0               # the veins' sense across the principal axis / along it, from which the midrib runs across
 VEIN_TURN_ELONGATION = 2.0    # ... on a blade whose principal standard deviations differ less than this (wider than long)
@@ -664,7 +669,49 @@ def _base_without_petiole(contour: Array, centre: Array, axis: Array, apex: Arra
     widest = max(_width_at(s, lat, x, step) for x in np.linspace(s.min(), s.max(), 21)[1:-1])
     if abs(float((far - centre) @ np.array([-axis[1], axis[0]]))) > SHOULDER * widest:
         return ends[b], note                          # that is a shoulder of a truncate base: its middle
+    stub = _stub_root(contour, tip, far, widest, step)
+    if stub is not None:
+        return stub, note                             # a petiole stub too short to be found as a petiole
     return _taper_tip(contour, tip, far, step), note  # a wedge's point thinner than the segmentation resolves
+
+
+def _stub_root(contour: Array, apex: Array, end: Array, widest: float, f: float) -> Array | None:
+    """Where a petiole stub at the blade's ``end`` (too short to be found as a petiole) meets the
+    blade, or None where there is no stub. Walking from ``end`` towards ``apex``, the contour's
+    width across the line stays narrow (at most :data:`STUB_WIDTH` of ``widest``) over at least
+    :data:`STUB_MIN` of its widths, then more than doubles within :data:`STUB_MAX` of the length;
+    along the stub it grows less than :data:`STUB_GROWTH` of the blade's growth over as long just
+    past it (a wedge-shaped base grows evenly, or faster towards its point's blur). The base is
+    where the width leaves the stub's (half as wide again)."""
+    length = float(np.hypot(*(apex - end)))
+    if length <= 0:
+        return None
+    d = (end - apex) / length                       # the frame of _side_profile: the end ahead
+    s, lat = _frame(contour, end, d)
+    i0 = int(np.argmin(np.hypot(*(contour - end).T)))
+    reach = 2 * STUB_MAX * length
+    t = np.arange(0.0, reach, 0.5)
+    a, b = _side_profile(s, lat, i0, 1, reach, t), _side_profile(s, lat, i0, -1, reach, t)
+    width, mid = np.abs(a - b), 0.5 * (a + b)
+    start = int(np.argmax(width >= 1.5 * f))        # past the blurred end
+    w0 = float(np.median(width[start:start + max(4, int(2 * f))]))
+    if w0 <= 0 or w0 > STUB_WIDTH * widest:
+        return None
+    wide = np.nonzero(width[start:] > 2 * w0 + f)[0]
+    if not len(wide):
+        return None
+    j = start + int(wide[0])                        # where the blade has widened the stub past twice
+    run = t[j] - t[start]
+    if t[j] > STUB_MAX * length or run < STUB_MIN * w0 or j - start < 4 or j + (j - start) > len(t):
+        return None
+    stub_slope = float(np.polyfit(t[start:j], width[start:j], 1)[0])
+    blade_slope = float(np.polyfit(t[j:j + j - start], width[j:j + j - start], 1)[0])
+    if stub_slope >= STUB_GROWTH * blade_slope:
+        return None
+    k = j
+    while k > start and width[k - 1] > 1.5 * w0:
+        k -= 1                                      # back to where the stub's width ends
+    return np.asarray(end - t[k] * d + mid[k] * np.array([-d[1], d[0]]), np.float64)
 
 
 def _apex(contour: Array, base: Array, axis: Array, cone_deg: float = 45.0) -> Array:
