@@ -91,3 +91,60 @@ def test_multisampled_target_resolves_on_read(gl, presets):
     ref = gl.render_many([p], (64, 64), "three-quarter", camera=cam)[0]
     diff = np.abs(img.astype(np.int16) - ref.astype(np.int16)).max(axis=-1)
     assert np.mean(diff > 2) < 0.005
+
+
+def test_unpremultiply_in_place_is_the_copy():
+    """``unpremultiply(img, out=img)`` (the thumbnail atlas, straightened once) writes what the
+    copying form returns, and leaves full and empty pixels as they were."""
+    rng = np.random.default_rng(7)
+    img = rng.integers(0, 256, size=(40, 30, 4), dtype=np.uint8)
+    img[..., :3] = np.minimum(img[..., :3], img[..., 3:4])   # premultiplied: colour <= alpha
+    img[:5, :, 3] = 255
+    img[5:9, :, 3] = 0
+    copy = unpremultiply(img)
+    assert copy is not img
+    inplace = img.copy()
+    assert unpremultiply(inplace, out=inplace) is inplace
+    np.testing.assert_array_equal(inplace, copy)
+    np.testing.assert_array_equal(copy[:9], img[:9])   # alpha 255 or 0: unchanged
+    opaque = np.full((4, 4, 4), 255, np.uint8)
+    assert unpremultiply(opaque) is opaque
+
+
+def test_jitter_rows_uploaded_again_only_when_they_change(gl, presets):
+    """JitterTable.upload writes nothing when the texture holds the same rows (one render() of a
+    jittered leaf after another), writes again after set_seed replaced row 0 or for other rows,
+    and the texture then holds what was asked."""
+    from leafview.core.blade import JITTER_TABLE_SIZE, jitter_table
+    from leafview.core.params import Jitter
+    from leafview.gpu.resources import JitterTable
+
+    a, b = jitter_table(Jitter(enabled=True, seed=3)), jitter_table(Jitter(enabled=True, seed=4))
+    table = JitterTable(gl.ctx)
+    try:
+        assert table.upload(a[None]) == a.nbytes
+        assert table.upload(a[None]) == 0
+        assert table.upload(np.stack([a, b])) == 2 * a.nbytes
+        assert table.set_seed(Jitter(enabled=True, seed=4)) == a.nbytes   # row 0 now b
+        assert table.upload(np.stack([a, b])) == 2 * a.nbytes           # so a is written again
+        rows = np.frombuffer(table.texture.read(), np.float32).reshape(-1, JITTER_TABLE_SIZE)
+        np.testing.assert_array_equal(rows[:2], np.stack([a, b]))
+    finally:
+        table.release()
+
+
+def test_repeated_render_reuses_its_vertex_array_and_pixels(gl, presets):
+    """One render() after another with the same features draws through the same vertex array
+    (none made per call) and gives the same pixels; another feature set (a textured or a lobed
+    leaf) gets its own and still matches its render_many image."""
+    leaf = presets["ovate"]
+    first = gl.render(leaf, 48, "three-quarter")
+    vao = gl._baked_vao._vao
+    assert vao is not None
+    again = gl.render(leaf, 48, "three-quarter")
+    assert gl._baked_vao._vao is vao
+    np.testing.assert_array_equal(first, again)
+    others = [p for name, p in presets.items() if name != "ovate"][:3]
+    for p in others:
+        np.testing.assert_array_equal(gl.render(p, 48, "side"), gl.render_many([p], 48, "side")[0])
+    np.testing.assert_array_equal(gl.render(leaf, 48, "three-quarter"), first)

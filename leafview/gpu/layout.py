@@ -31,6 +31,7 @@ from __future__ import annotations
 
 from collections.abc import Container, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from types import MappingProxyType
 from typing import Any
 
@@ -76,15 +77,16 @@ class Block:
     doc: str = ""
     derived: tuple[str, ...] = ()  # members computed from the others (not parameters)
 
-    @property
+    @cached_property
     def dtype(self) -> np.dtype:
+        """The numpy record of one struct (built once: callers read it per draw)."""
         fields = []
         for name, glsl, count in self.members:
             base, shape = _TYPES[glsl]
             fields.append((name, base, shape if count == 1 else (count, *shape)))
         return np.dtype(fields)
 
-    @property
+    @cached_property
     def nbytes(self) -> int:
         return self.dtype.itemsize
 

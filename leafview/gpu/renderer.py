@@ -85,6 +85,10 @@ _MAX_ATLAS = 4096     # atlas side limit in pixels (well inside GL_MAX_RENDERBUF
 DRAW_VARYINGS = (*WORLD_VARYINGS, "v_uv", "v_rib")
 DRAW_VERTEX_FORMAT = "3f 3f 2f 2f"
 DRAW_VERTEX_BYTES = 40
+# the blocks' dtypes and sizes, built once (Block.dtype builds a new dtype at each access)
+_LEAF_BYTES = LEAF_BLOCK.nbytes
+_FRAME_DTYPE = FRAME_BLOCK.dtype
+_FRAME_BYTES = _FRAME_DTYPE.itemsize
 _COMMAND = np.dtype([("count", "<u4"), ("instances", "<u4"), ("first_index", "<u4"), ("base_vertex", "<i4"),
                      ("base_instance", "<u4")])   # DrawElementsIndirectCommand
 
@@ -147,6 +151,7 @@ class LeafRenderer:
             self._batch_frame = self._objects.own(GrowingBuffer(self.ctx))
             self._batch_colour = self._objects.own(GrowingBuffer(self.ctx))
             self._batch_commands = self._objects.own(GrowingBuffer(self.ctx))
+            self._baked_vao = self._objects.own(_BakedArray())
         except BaseException:
             self.release()
             raise
@@ -163,6 +168,9 @@ class LeafRenderer:
         self._vein_layer = -1
         self.lobed = False  # the leaf last given to set_leaf is lobed (drawn on lobed_grid)
         self._draw_defines: dict[str, int] = dict(NO_LOBE_DEFINES)   # draw's variant: no sweep branch unless lobed
+        # render_many's programs by their defines: (capture program, baked program, colour format)
+        self._chunk_programs: dict[tuple[Any, ...], tuple[moderngl.Program, moderngl.Program,
+                                                          tuple[str, tuple[str, ...]]]] = {}
 
     # -- lifetime -------------------------------------------------------------------------------
     def release(self) -> None:
@@ -391,15 +399,13 @@ class LeafRenderer:
         if keys:
             self.ripples.update(keys)  # one batched dispatch for every signal that changed
         leaf_rows, leaf_stride = self._write_records(self._batch_leaf, records)
-        if leaf_stride == LEAF_BLOCK.nbytes:   # tightly packed (llvmpipe: a 16-byte alignment): one dispatch
+        if leaf_stride == _LEAF_BYTES:   # tightly packed (llvmpipe: a 16-byte alignment): one dispatch
             self.prepare.run(leaf_rows, n)
         else:   # rows sit at the uniform-offset alignment: one small dispatch each
             for i in range(n):
                 self.prepare.run(leaf_rows, 1, offset=i * leaf_stride)
         # the shader permutation without the features no leaf of this chunk uses
-        veins = vein_defines(records)
-        program = self.resources.leaf_program({**feature_defines(records), **veins, **lobe_defines(records)},
-                                              varyings=DRAW_VARYINGS)
+        program, baked, colour_format = self._programs_for(records)
         geometry = self.resources.grid(*grid)
         nverts = geometry.vertices
         points = geometry.points(program)
@@ -407,20 +413,25 @@ class LeafRenderer:
         self.batch_veins.use()
         self.batch_lobes.use()
         self.frame.bind()   # the capture computes gl_Position too (discarded)
-        leaf_bytes, frame_bytes = LEAF_BLOCK.nbytes, FRAME_BLOCK.nbytes   # (each builds the block's dtype)
+        leaf_bytes, frame_bytes = _LEAF_BYTES, _FRAME_BYTES
         with self.resources.capture.recording(n * nverts, DRAW_VERTEX_BYTES) as rec:
             # 1. the only vertex-shader pass over the leaves: capture, frame each camera on it
             for i in range(n):
                 leaf_rows.bind_to_uniform_block(LEAF_BINDING, offset=i * leaf_stride, size=leaf_bytes)
                 rec.add(points, nverts)
-            frames = np.zeros(n, dtype=FRAME_BLOCK.dtype)
+            frames = np.zeros(n, dtype=_FRAME_DTYPE)
             if camera is not None:
                 fill_frame(frames[0], camera, srgb=not linear, flat=flat, size=(w, h))
                 frames[1:] = frames[0]
             else:
                 world = rec.records()[:, :3].reshape(n, nverts, 3)
-                for i, cam in enumerate(frame_views(view, world, (w, h))):
-                    fill_frame(frames[i], cam, srgb=not linear, flat=flat, size=(w, h))
+                cams = frame_views(view, world, (w, h))
+                fill_frame(frames[0], cams[0], srgb=not linear, flat=flat, size=(w, h))
+                if n > 1:   # the lights and flags are every leaf's; the matrices and eye its own
+                    frames[1:] = frames[0]
+                    frames["view"][1:] = np.stack([c.view.T for c in cams[1:]])
+                    frames["proj"][1:] = np.stack([c.proj.T for c in cams[1:]])
+                    frames["eye"][1:] = np.stack([c.eye for c in cams[1:]])
             frame_rows, frame_stride = self._write_records(self._batch_frame, frames)
             colours = self._batch_colour.write(_leaf_colours(records))
             commands = self._batch_commands.write(_draw_commands(n, geometry.triangles * 3, nverts))
@@ -433,15 +444,7 @@ class LeafRenderer:
             self.ctx.scissor = None
             target.clear(bg)
             self.ctx.enable_only(moderngl.DEPTH_TEST)
-            baked = self.resources.programs.program("leaf_baked.vert", "leaf.frag",
-                                                    defines={**texture_defines(records), **veins,
-                                                             "LEAF_BAKED_RIB": 1})
-            fmt, names = _colour_format(baked)
-            vao = self.ctx.vertex_array(
-                baked,
-                [(rec.buffer, *_present(baked, DRAW_VERTEX_FORMAT, ("in_position", "in_normal", "in_uv", "in_rib"))),
-                 (colours, fmt, *names)],
-                index_buffer=geometry.ibo, index_element_size=4)
+            vao = self._baked_vao.get(self.ctx, baked, rec.buffer, colours, geometry.ibo, colour_format)
             try:
                 for i in range(n):
                     x, y = (i % cols) * w, (i // cols) * h
@@ -449,19 +452,36 @@ class LeafRenderer:
                     frame_rows.bind_to_uniform_block(FRAME_BINDING, offset=i * frame_stride, size=frame_bytes)
                     vao.render_indirect(commands, moderngl.TRIANGLES, count=1, first=i)
             finally:
-                vao.release()
                 self.ctx.scissor = None
 
-        # 3. one readback (resolving the samples), split into tiles
-        atlas = target.read(copy=False)
+        # 3. one readback (resolving the samples), straightened once for the whole atlas (a pixel's
+        # value depends on that pixel alone), split into tiles
+        atlas = target.read()
+        if samples and not linear and bg[3] == 0.0:
+            unpremultiply(atlas, out=atlas)
+        if n == 1 and atlas.shape[:2] == (h, w):
+            return [atlas]   # one leaf: the atlas is its image
         images = []
         for i in range(n):
             x, y = (i % cols) * w, (tiles_y - 1 - i // cols) * h   # the readback has row 0 at the top
-            img = atlas[y:y + h, x:x + w]
-            if samples and not linear and bg[3] == 0.0:
-                img = unpremultiply(img)
-            images.append(np.ascontiguousarray(img))
+            images.append(np.ascontiguousarray(atlas[y:y + h, x:x + w]))
         return images
+
+    def _programs_for(self, records: NDArray[Any]) -> tuple[moderngl.Program, moderngl.Program,
+                                                               tuple[str, tuple[str, ...]]]:
+        """The capture program (the features the chunk's leaves use), the baked program that draws
+        from its records and the colour attributes' format of the latter: looked up once per set
+        of defines (the cache's programs live as long as the shared program cache)."""
+        veins = vein_defines(records)
+        capture_defines = {**feature_defines(records), **veins, **lobe_defines(records)}
+        baked_defines = {**texture_defines(records), **veins, "LEAF_BAKED_RIB": 1}
+        key = (tuple(sorted(capture_defines.items())), tuple(sorted(baked_defines.items())))
+        found = self._chunk_programs.get(key)
+        if found is None:
+            program = self.resources.leaf_program(capture_defines, varyings=DRAW_VARYINGS)
+            baked = self.resources.programs.program("leaf_baked.vert", "leaf.frag", defines=baked_defines)
+            found = self._chunk_programs[key] = (program, baked, _colour_format(baked))
+        return found
 
     def _write_records(self, buf: GrowingBuffer, records: np.ndarray) -> tuple[moderngl.Buffer, int]:
         """Write ``records`` one per aligned row into ``buf`` (grown when too small); returns the
@@ -495,6 +515,39 @@ class LeafRenderer:
         finally:
             vao.release()
             vbo.release()
+
+
+class _BakedArray:
+    """The vertex array of the thumbnail draw (captured records, per-leaf colours, the grid's
+    triangles), kept while the same program and buffers are asked for: one render() after another
+    makes none. Keyed by the objects themselves (held here, so their identities are not reused);
+    a new program or buffer (a grown capture, an evicted grid) replaces it."""
+
+    def __init__(self) -> None:
+        self._key: tuple[Any, ...] = ()
+        self._vao: moderngl.VertexArray | None = None
+
+    def get(self, ctx: moderngl.Context, baked: moderngl.Program, records: moderngl.Buffer,
+            colours: moderngl.Buffer, ibo: moderngl.Buffer,
+            colour_format: tuple[str, tuple[str, ...]]) -> moderngl.VertexArray:
+        key = (baked, records, colours, ibo)
+        if self._vao is not None and len(self._key) == len(key) and all(a is b for a, b in zip(self._key, key)):
+            return self._vao
+        self.release()
+        fmt, names = colour_format
+        self._vao = ctx.vertex_array(
+            baked,
+            [(records, *_present(baked, DRAW_VERTEX_FORMAT, ("in_position", "in_normal", "in_uv", "in_rib"))),
+             (colours, fmt, *names)],
+            index_buffer=ibo, index_element_size=4)
+        self._key = key
+        return self._vao
+
+    def release(self) -> None:
+        """Release the vertex array (idempotent; safe after the context was released)."""
+        if self._vao is not None:
+            self._vao.release()
+        self._vao, self._key = None, ()
 
 
 # the per-leaf attributes of the thumbnail draw (_leaf_colours): name, format, bytes

@@ -140,6 +140,7 @@ class JitterTable:
                 else np.ascontiguousarray(np.atleast_2d(np.asarray(tables, np.float32))))
         self.texture = self._make(rows.shape[1], rows.shape[0], rows.tobytes())
         self._seed: int | None = None
+        self._rows: bytes | None = None   # what the last upload() wrote (the same tables again write nothing)
 
     def _make(self, width: int, height: int, data: bytes | None = None) -> moderngl.Texture:
         tex = self.ctx.texture((width, height), 1, data, dtype="f4")
@@ -153,6 +154,7 @@ class JitterTable:
         table = jitter_table(jitter)
         self.texture.write(table.tobytes(), viewport=(0, 0, JITTER_TABLE_SIZE, 1))
         self._seed = jitter.seed
+        self._rows = None
         return int(table.nbytes)
 
     def upload(self, tables: NDArray[np.float32]) -> int:
@@ -162,13 +164,16 @@ class JitterTable:
         rows = int(tables.shape[0])
         if rows == 1 and not tables.any():
             return 0
+        data = np.ascontiguousarray(tables, dtype=np.float32).tobytes()
+        if data == self._rows:   # the texture holds these rows already (one render() after another)
+            return 0
         if self.texture.height < rows:
             self.texture.release()
             self.texture = self._make(JITTER_TABLE_SIZE, next_pow2(rows))
-        data = np.ascontiguousarray(tables, dtype=np.float32)
-        self.texture.write(data.tobytes(), viewport=(0, 0, JITTER_TABLE_SIZE, rows))
+        self.texture.write(data, viewport=(0, 0, JITTER_TABLE_SIZE, rows))
         self._seed = None  # row 0 no longer holds a single leaf's seed
-        return int(data.nbytes)
+        self._rows = data
+        return len(data)
 
     def use(self) -> None:
         self.texture.use(location=JITTER_UNIT)
