@@ -74,16 +74,11 @@ vec3 visible_normal() {
     return normalize(v_normal) * (gl_FrontFacing ? 1.0 : -1.0);
 }
 
-// the specular lobe: 0 the plain leaf's (c^40), 1 a veined leaf's sunny upper side (narrow gloss,
-// c^60), 2 its shadow lower side (broad sheen, c^8); c >= 0. Constant exponents by repeated
-// squaring: pow() is exp2(log2()) on llvmpipe, and this lobe was a fifth of a multisampled
-// thumbnail's time there (docs/benchmarks.md); the products equal pow() to float rounding.
-float spec_lobe(float c, int lobe) {
-    float c2 = c * c, c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8, c32 = c16 * c16;
-    return lobe == 0 ? c32 * c8 : (lobe == 1 ? (c32 * c16) * (c8 * c4) : c8);
-}
-
-// spec_lobe of c from its square c2 = c² (key_fill: no square root)
+// the specular lobe of c = max(n·h, 0) from its square c2 = c² (no square root is needed for it):
+// 0 the plain leaf's (c^40), 1 a veined leaf's sunny upper side (narrow gloss, c^60), 2 its shadow
+// lower side (broad sheen, c^8). Constant exponents by repeated squaring: pow() is exp2(log2()) on
+// llvmpipe, and this lobe was a fifth of a multisampled thumbnail's time there
+// (docs/benchmarks.md); the products equal pow() to float rounding.
 float spec_lobe_sq(float c2, int lobe) {
     float c4 = c2 * c2, c8 = c4 * c4, c16 = c8 * c8, c32 = c16 * c16;
     return lobe == 0 ? c32 * c8 : (lobe == 1 ? (c32 * c16) * (c8 * c4) : c8);
@@ -150,11 +145,11 @@ bool leaf_albedo(out vec3 albedo, out bool textured, bool veined) {
 #if defined(LEAF_CANOPY) && !defined(LEAF_AOV) && !defined(LEAF_DEPTH)
 // The tint of light that went through the leaf: albedo² scaled to the albedo's luminance (Rec. 709):
 // as bright as the light the leaf reflects (a leaf transmits about as much as it reflects in the
-// visible), deeper in colour (it crossed the pigments twice over); at most 1.
-vec3 backlight_tint(vec3 albedo) {
-    const vec3 lum = vec3(0.2126, 0.7152, 0.0722);
-    vec3 sq = albedo * albedo;
-    return min(sq * (dot(albedo, lum) / max(dot(sq, lum), 1e-8)), vec3(1.0));
+// visible), deeper in colour (it crossed the pigments twice over); at most 1. canopy_color computes
+// it with its one division (backlight_tint(albedo) = min(sq · dot(albedo, lum) / backlight_norm, 1)).
+const vec3 BACKLIGHT_LUM = vec3(0.2126, 0.7152, 0.0722);
+float backlight_norm(vec3 sq) {
+    return max(dot(sq, BACKLIGHT_LUM), 1e-8);
 }
 
 // The sample mask of a fragment whose coverage is `coverage` (0..1): round(coverage × samples + dither)
@@ -175,26 +170,40 @@ int coverage_mask(float coverage) {
 }
 
 // The canopy look of the visible side (leaf_light.py: canopy_radiance): linear radiance before the
-// tone map. `n` the shading normal, `geo` the visible side's geometric normal.
-vec3 canopy_color(vec3 n, vec3 geo, vec3 view_dir, vec3 albedo, float translucency, float sheen, int lobe) {
+// tone map. N the visible side's shading normal and V the vector towards the eye, neither of them
+// unit: as key_fill, the lengths are divided out with two square roots, and with the same one
+// division as backlight_tint's, where normalize(N), normalize(V), the half vector's normalize and the
+// tint's quotient took four of each on llvmpipe. n = N/|N|, v = V/|V|, unit l: |V|² |l + v|² =
+// den = 2 |V| (|V| + l·V), and (max(n·h, 0))² = num²/den with num = max(|V| n·l + n·V, 0). `geo`:
+// the visible side's unit geometric normal (the shadow maps' offset), or, with geo_is_n, n itself.
+vec3 canopy_color(vec3 N, vec3 V, vec3 geo, bool geo_is_n, vec3 albedo, float translucency, float sheen,
+                  int lobe) {
     vec3 l = light.sun.xyz;
+    vec3 sq = albedo * albedo;
+    float norm = backlight_norm(sq);
+    float sn = sqrt(dot(N, N)), sv = sqrt(dot(V, V));
+    float den = max(2.0 * sv * (sv + dot(l, V)), 1e-20);
+    float inv = 1.0 / (sn * sv * den * norm);
+    vec3 n = N * (inv * (sv * den * norm));                            // N / |N|
     float ndl = dot(n, l);
+    float num = max(ndl * sv + dot(n, V), 0.0);                        // sqrt(den) · max(n·h, 0)
+    float spec = light.tone.w * sheen * spec_lobe_sq(num * num * (inv * (sn * sv * norm)), lobe) * step(0.0, ndl);
+    vec3 tint = min(sq * (dot(albedo, BACKLIGHT_LUM) * (inv * (sn * sv * den))), vec3(1.0));
     float through = light.tone.z * translucency;
-    vec3 tint = backlight_tint(albedo);
-    vec3 h = normalize(l + view_dir);
-    float spec = light.tone.w * sheen * spec_lobe(max(dot(n, h), 0.0), lobe) * step(0.0, ndl);
     vec3 sun = max(ndl, 0.0) * albedo + through * max(-ndl, 0.0) * tint + vec3(spec);
     float visible = 1.0;
 #ifdef LEAF_SHADOWS
-    // the side that faces the sun receives it (the offset along its normal moves toward the sun)
+    // sun_visibility turns the normal to the side that faces the sun (the offset moves toward it)
     float depth = -(frame.view * vec4(v_world, 1.0)).z;
-    visible = sun_visibility(v_world, dot(geo, l) >= 0.0 ? geo : -geo, depth);
+    visible = sun_visibility(v_world, geo_is_n ? n : geo, depth);
 #endif
     float ao = 1.0;
 #ifdef LEAF_SSAO
     ao = texelFetch(ambient_occlusion, ivec2(gl_FragCoord.xy), 0).r;
 #endif
-    vec3 ambient = sh_irradiance(n) * albedo + through * sh_irradiance(-n) * tint;
+    vec3 sky_front, sky_back;
+    sh_irradiance_both(n, sky_front, sky_back);
+    vec3 ambient = sky_front * albedo + through * sky_back * tint;
     return light.sun.w * light.sun_colour.rgb * visible * sun + ao * ambient;
 }
 #endif
@@ -278,13 +287,19 @@ void main() {
     // towards the eye, not unit (llvmpipe evaluates both arms of a ?:)
     vec3 view = frame.eye.w > 0.5 ? frame.eye.xyz - v_world : -frame.eye.xyz;
 #ifdef LEAF_CANOPY
-    vec3 view_dir = normalize(view);
 #ifdef LEAF_STEMS
     sheen = 0.02;   // bark: a faint broad sheen
     lobe = 2;
 #endif
-    frag_color = vec4(canopy_output(canopy_color(n, visible_normal(), view_dir, albedo, translucency, sheen, lobe)),
-                      1.0);
+#if defined(LEAF_NO_VEINS) || defined(LEAF_VEIN_SKIN)
+    // no relief: the interpolated normal as it is (canopy_color divides by its length), also the
+    // geometric one
+    vec3 shading = v_normal * (front ? 1.0 : -1.0);
+    vec3 color = canopy_color(shading, view, shading, true, albedo, translucency, sheen, lobe);
+#else
+    vec3 color = canopy_color(n, view, visible_normal(), false, albedo, translucency, sheen, lobe);
+#endif
+    frag_color = vec4(canopy_output(color), 1.0);
 #else
     vec3 color = frame.ambient.rgb * albedo;
     if (frame.flags.y != 0) {

@@ -20,8 +20,8 @@ vec3 sky_upper(vec3 d) {
     vec4 p = light.sky_perez[0];
     vec4 q = light.sky_perez[1];
     float cos_t = max(d.z, 0.0);
-    float gamma = acos(clamp(dot(d, light.sun.xyz), -1.0, 1.0));
-    float cg = cos(gamma);
+    float cg = clamp(dot(d, light.sun.xyz), -1.0, 1.0);   // cos(gamma), no cos(acos())
+    float gamma = acos(cg);
     float glow = p.z * exp(p.w * gamma);
     float g = 0.5 * glow / (1.0 + glow + q.x * cg * cg);
     float h = 1.0 - cos_t;
@@ -46,17 +46,32 @@ vec3 sun_disc(vec3 d) {
     return (1.0 - t * t * (3.0 - 2.0 * t)) * SKY_SUN_DISC * light.sun.w * light.sun_colour.rgb;
 }
 
+// the two halves of sh_irradiance: the even bands' terms (l = 0, 2), the same for n and -n, and
+// the odd band's (l = 1), which changes sign with n
+void sh_parts(vec3 n, out vec3 even, out vec3 odd) {
+    even = light.sky_sh[0].rgb * 0.28209479
+         + light.sky_sh[4].rgb * (1.09254843 * n.x * n.y)
+         + light.sky_sh[5].rgb * (1.09254843 * n.y * n.z)
+         + light.sky_sh[6].rgb * (0.31539157 * (3.0 * n.z * n.z - 1.0))
+         + light.sky_sh[7].rgb * (1.09254843 * n.x * n.z)
+         + light.sky_sh[8].rgb * (0.54627422 * (n.x * n.x - n.y * n.y));
+    odd = light.sky_sh[1].rgb * (0.48860251 * n.y)
+        + light.sky_sh[2].rgb * (0.48860251 * n.z)
+        + light.sky_sh[3].rgb * (0.48860251 * n.x);
+}
+
 // folded irradiance E(n)/π of the unit normal n from the nine convolved coefficients
 vec3 sh_irradiance(vec3 n) {
-    vec3 e = light.sky_sh[0].rgb * 0.28209479
-           + light.sky_sh[1].rgb * (0.48860251 * n.y)
-           + light.sky_sh[2].rgb * (0.48860251 * n.z)
-           + light.sky_sh[3].rgb * (0.48860251 * n.x)
-           + light.sky_sh[4].rgb * (1.09254843 * n.x * n.y)
-           + light.sky_sh[5].rgb * (1.09254843 * n.y * n.z)
-           + light.sky_sh[6].rgb * (0.31539157 * (3.0 * n.z * n.z - 1.0))
-           + light.sky_sh[7].rgb * (1.09254843 * n.x * n.z)
-           + light.sky_sh[8].rgb * (0.54627422 * (n.x * n.x - n.y * n.y));
-    return max(e, vec3(0.0));
+    vec3 even, odd;
+    sh_parts(n, even, odd);
+    return max(even + odd, vec3(0.0));
+}
+
+// sh_irradiance(n) and sh_irradiance(-n) (a two-sided leaf's two faces) from one evaluation
+void sh_irradiance_both(vec3 n, out vec3 front, out vec3 back) {
+    vec3 even, odd;
+    sh_parts(n, even, odd);
+    front = max(even + odd, vec3(0.0));
+    back = max(even - odd, vec3(0.0));
 }
 #endif
