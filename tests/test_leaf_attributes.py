@@ -183,22 +183,32 @@ def test_scene_draw_reads_every_kind_as_numpy(gl, mixed_scene):
 @pytest.mark.gl
 def test_vertex_records_of_a_frame_equal_numpy(gl, mixed_scene):
     """After a draw, each level's records start at its command's baseInstance, hold exactly the
-    leaves of that level, and are the rows' LeafVertex members with the row in leaf_vertex_row."""
+    leaves of that level, and are the rows' LeafVertex members with the row in leaf_vertex_row.
+    The batches share one record buffer, each batch's culling pass overwriting it just before its
+    draw: after a frame it holds the last batch's records, so each batch is also drawn alone and its
+    records read then (the levels must not change by that)."""
     scene = mixed_scene
     size = (96, 64)
     cam = scene_camera(scene, size, "three-quarter")
     cam = type(cam)(cam.view, cam.proj @ np.diag([2.0, 2.0, 1.0, 1.0]), cam.eye, cam.perspective)  # some culled
+    settings = CullSettings(max_error_px=0.3)
     with SceneRenderer(gl.ctx, scene, max_block_bytes=100 * LEAF_BLOCK.nbytes, resources=gl.resources) as r, \
             OffscreenTarget(gl.ctx, size) as target:
+        assert len(r.batches) >= 2 and all(b.vertices is r.vertices for b in r.batches)
         target.use()
         r.set_camera(cam, size)
-        r.draw(CullSettings(max_error_px=0.3))
+        r.draw(settings)
         levels = r.levels()
-        for b in r.batches:
+        last = np.frombuffer(r.vertices.read(), LEAF_VERTEX_BLOCK.dtype)
+        for i, b in enumerate(r.batches):
+            r.draw(settings, batches=[i])
             rows = np.frombuffer(b.rows.read(), LEAF_BLOCK.dtype)
             commands = np.frombuffer(b.commands.read(), DRAW_COMMAND_DTYPE)
-            records = np.frombuffer(b.vertices.read(), LEAF_VERTEX_BLOCK.dtype)
+            records = np.frombuffer(r.vertices.read(), LEAF_VERTEX_BLOCK.dtype)
             counts = commands["instance_count"].astype(int)
+            if i == len(r.batches) - 1:   # the frame left its last batch's records, the same ones
+                n = int(counts.sum())
+                assert sorted(x.tobytes() for x in last[:n]) == sorted(x.tobytes() for x in records[:n])
             assert list(commands["base_instance"]) == list(np.r_[0, np.cumsum(counts)[:-1]])
             for k, (first, n) in enumerate(zip(commands["base_instance"], counts)):
                 got = records[first:first + n]
@@ -206,6 +216,7 @@ def test_vertex_records_of_a_frame_equal_numpy(gl, mixed_scene):
                 assert sorted(row.tolist()) == np.flatnonzero(levels[b.start:b.start + b.count] == k).tolist()
                 want = vertex_records(rows, row)
                 assert got.tobytes() == want.tobytes(), (b.start, k)
+        assert np.array_equal(r.levels(), levels)
     ref = cull_reference(scene, r.cull_rows, cam, size, CullSettings(max_error_px=0.3))
     assert np.array_equal(levels, ref)
     assert (levels == -1).any() and len(set(levels.tolist()) - {-1}) >= 2

@@ -148,6 +148,44 @@ def test_too_many_leaves_refused():
         SceneSpec(species=(LeafParams(),), leaves=10**8)
 
 
+@pytest.mark.parametrize("layout", ["field", "hedge", "plant"])
+def test_two_threads_give_the_bytes_of_one(presets, monkeypatch, layout):
+    """A large scene builds its twigs, nodes, leaf frames and stem mesh and packs its rows on two
+    threads (leafview.scene.stems.in_two_threads): the same bytes as on one thread."""
+    import leafview.scene.plants as plants
+    import leafview.scene.stems as stems
+    from leafview.gpu.scene import pack_rows, pack_scene, species_tables
+
+    spec = _spec(presets, n=3001, layout=layout, plants=1 if layout == "plant" else 9, colour_variation=0.1)
+    monkeypatch.setattr(stems, "PARALLEL_MIN", 10**12)
+    one = build_scene(spec)
+    used: list[object] = []
+    spy = stems.background
+
+    def counted(fn, *args):
+        used.append(fn)
+        return spy(fn, *args)
+
+    monkeypatch.setattr(stems, "background", counted)
+    monkeypatch.setattr(plants, "background", counted)
+    monkeypatch.setattr(stems, "PARALLEL_MIN", 7)
+    monkeypatch.setattr(stems.os, "cpu_count", lambda: 2)
+    two = build_scene(spec)
+    assert len(used) >= 5   # twigs (where the layout has them), nodes, sort, petiole ends, blades, stems
+    for name in ("matrices", "factors", "tint", "species_id"):
+        assert getattr(one, name).tobytes() == getattr(two, name).tobytes(), name
+    assert one.placement is not None and two.placement is not None
+    for name in ("along", "height", "plant", "plant_origins"):
+        assert getattr(one.placement, name).tobytes() == getattr(two.placement, name).tobytes(), name
+    assert one.stems is not None and two.stems is not None
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(one.stems, two.stems))
+    assert one.placement.stem_ranges == two.placement.stem_ranges
+    records = species_tables(one)[0]
+    a = pack_scene(one, 0, len(one), records)
+    b = pack_rows(two, 0, len(two), records, np.empty(len(two) + 3, LEAF_BLOCK.dtype))
+    assert a.tobytes() == b.tobytes()
+
+
 # -- GPU ----------------------------------------------------------------------------------------
 @pytest.fixture
 def ctx(gl):

@@ -100,6 +100,7 @@ from leafview.gpu.vein_draw import VeinDraw, fresh_layers
 from leafview.resources import resolve_preset
 from leafview.scene.camera import Camera, top_down
 from leafview.scene.spec import VBAR_GAP, Scene, SceneSpec
+from leafview.scene.stems import in_two_threads
 from leafview.scene.variety import interpolate_bend, load_table, sphere_padding
 
 __all__ = ["LOD_GRIDS", "CullSettings", "SceneRenderer", "SceneLimitError", "pack_scene", "species_cull", "plan_batches",
@@ -307,6 +308,15 @@ def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
     return recs
 
 
+def pack_rows(scene: Scene, start: int, stop: int, species_records: NDArray[Any], out: NDArray[Any]) -> NDArray[Any]:
+    """:func:`pack_scene` of leaves ``start:stop`` into ``out``, a large run on two threads
+    (:func:`leafview.scene.stems.in_two_threads`; rows are packed one by one, so the bytes are
+    those of one call)."""
+    rows = out[:stop - start]
+    in_two_threads(stop - start, lambda a, b: pack_scene(scene, start + a, start + b, species_records, out=rows[a:b]))
+    return rows
+
+
 def _write_variety(scene: Scene, part: NDArray[Any], a: int, b: int, loads: Any, p_max: np.float32) -> None:
     """Leaves ``a:b``'s variety into their rows ``part`` (see :func:`pack_scene`)."""
     ripples = _vec4_run(part, ("ripple_l", "ripple_r"))    # (n, 2, 4): P, λ, k, θ of each side
@@ -497,16 +507,18 @@ def cull_reference(scene: Scene, cull_rows: NDArray[Any], camera: Camera, size: 
 
 # -- GPU ----------------------------------------------------------------------------------------
 class _SceneBatch:
-    """GL objects of one batch of leaves: rows, species ids, the per-level visible lists, the
-    visible leaves' vertex records, the draw commands, the vertex array that reads them and, when a
-    species takes an optional branch, the rows as texels."""
+    """GL objects of one batch of leaves: rows, species ids, the per-level visible lists, the draw
+    commands, the vertex array that reads the visible leaves' vertex records (in the renderer's
+    :attr:`SceneRenderer.vertices`, which every batch overwrites in turn) and, when a species
+    takes an optional branch, the rows as texels."""
 
     def __init__(self, owner: SceneRenderer, start: int, stop: int) -> None:
         ctx = owner.ctx
         self.start, self.count = start, stop - start
         self._objects = GLObjects()
         try:
-            rows = pack_scene(owner.scene, start, stop, owner.species_records, out=owner._host_rows)
+            assert owner._host_rows is not None
+            rows = pack_rows(owner.scene, start, stop, owner.species_records, owner._host_rows)
             self.rows = self._objects.own(ctx.buffer(rows))
             owner.resources.prepare.run(self.rows, self.count)
             # the members of ripples, bends and extended silhouettes as texels, when a species has one
@@ -516,7 +528,7 @@ class _SceneBatch:
                 ctx.buffer(owner.scene.species_id[start:stop].astype(np.uint32)))
             levels = len(owner.command_grids)
             self.visible = self._objects.own(ctx.buffer(reserve=4 * self.count * levels))
-            self.vertices = self._objects.own(ctx.buffer(reserve=LEAF_VERTEX_BLOCK.nbytes * self.count))
+            self.vertices = owner.vertices   # the renderer's, shared by the batches (not owned here)
             self.reset = np.zeros(levels, DRAW_COMMAND_DTYPE)
             self.reset["count"] = owner.index_counts
             self.reset["first_index"] = owner.first_index
@@ -632,8 +644,12 @@ class SceneRenderer:
             self.ibo = self._objects.own(ctx.buffer(np.concatenate(idx).astype(np.uint32).tobytes()))
             self.stems = self._make_stems(scene.stems)
             # one host array reused for every batch's rows (a 10⁶-leaf scene packs 7 batches)
-            self._host_rows: NDArray[Any] | None = np.empty(max((b - a for a, b in self.plan), default=0),
-                                                                LEAF_BLOCK.dtype)
+            largest = max((b - a for a, b in self.plan), default=0)
+            self._host_rows: NDArray[Any] | None = np.empty(largest, LEAF_BLOCK.dtype)
+            # the visible leaves' vertex records: one buffer for every batch, each batch's culling pass
+            # writes its records just before its draw reads them (34 MB for 10⁶ leaves, not 240 MB of
+            # fresh driver memory faulted in every frame)
+            self.vertices = self._objects.own(ctx.buffer(reserve=LEAF_VERTEX_BLOCK.nbytes * max(largest, 1)))
             for start, stop in self.plan:
                 ensure_alive(ctx, f"uploading leaves {start:,}..{stop:,} of {len(scene):,}")
                 self.batches.append(_SceneBatch(self, start, stop))
@@ -787,9 +803,12 @@ class SceneRenderer:
         self.veins.use()
         self.lobes.use()
 
-    def draw(self, settings: CullSettings = CullSettings(), *, defines: Mapping[str, object] | None = None) -> None:
+    def draw(self, settings: CullSettings = CullSettings(), *, defines: Mapping[str, object] | None = None,
+             batches: Sequence[int] | None = None) -> None:
         """Cull and draw every batch (and the stems) into the bound framebuffer. A context
         released or lost before or between batches raises :class:`~leafview.errors.GLContextLost`.
+        ``batches``: the indices (into :attr:`batches`) of those to cull and draw (None: all); the
+        vertex records in :attr:`vertices` after a draw are those of the last batch drawn.
 
         ``defines``: extra feature defines of a program variant to draw with (e.g. ``LEAF_AOV``,
         the label pass of :mod:`leafview.gpu.aov`); a variant whose vertex shader declares
@@ -816,7 +835,10 @@ class SceneRenderer:
         if stems is not None:
             stems.render(moderngl.TRIANGLES)
         self._set_cull_uniforms(settings)
+        chosen = None if batches is None else {int(i) for i in batches}
         for i, (batch, vao) in enumerate(zip(self.batches, vaos)):
+            if chosen is not None and i not in chosen:
+                continue
             ensure_alive(self.ctx, f"drawing batch {i + 1} of {len(self.batches)}")
             self._cull(batch)
             batch.use_rows()

@@ -35,6 +35,7 @@ size falloff, attachment, light facing, ground clearance) holds by construction.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from typing import Any
 
@@ -45,15 +46,17 @@ from leafview.core.params import ParamError
 from leafview.scene.stems import (
     GOLDEN_ANGLE,
     Mesh3,
-    Nodes,
     Skeleton,
     auto_twigs,
+    background,
     divergence,
     grow_skeleton,
+    in_two_threads,
     merge_meshes,
     place_nodes,
     split_counts,
     sweep_tubes,
+    two_threads,
 )
 
 __all__ = ["PlantSpec", "Placement", "grow_plant", "scatter", "PHYLLOTAXIS", "LAYOUTS",
@@ -264,21 +267,23 @@ def _rotate_rows(v: NDArray[np.float64], axis: NDArray[np.float64], c: NDArray[n
     return v * c + _cross_rows(axis, v) * s + axis * k
 
 
-def _orient(spec: PlantSpec, lv: Nodes, size: NDArray[np.float64], rel_height: NDArray[np.float64],
-            rng: np.random.Generator) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def _orient(spec: PlantSpec, out: NDArray[np.float64], normal: NDArray[np.float64],
+            rel_height: NDArray[np.float64], jit: NDArray[np.float64]
+            ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """The rotation of every blade as its three columns, (3, N) each: the world directions of leaf
-    x (width), y (base to apex) and z (upper side)."""
-    n = len(size)
-    hx, hy = lv.out[:, 0].copy(), lv.out[:, 1].copy()      # the petiole's horizontal direction
-    for fallback in (lv.normal, np.array([1.0, 0.0, 0.0])):      # petiole (nearly) vertical
+    x (width), y (base to apex) and z (upper side), from the petiole directions ``out`` and the
+    axis normals ``normal`` (N, 3) and the jitter angles ``jit`` (N, 3; radians): leaf by leaf,
+    so that any run of leaves gives the same numbers alone as in the whole."""
+    n = len(out)
+    hx, hy = out[:, 0].copy(), out[:, 1].copy()      # the petiole's horizontal direction
+    for fallback in (normal, np.array([1.0, 0.0, 0.0])):      # petiole (nearly) vertical
         weak = np.hypot(hx, hy) < 1e-6
         if not weak.any():
             break
-        alt = np.broadcast_to(fallback, lv.out.shape)[weak]
+        alt = np.broadcast_to(fallback, out.shape)[weak]
         hx[weak], hy[weak] = alt[:, 0], alt[:, 1]
     weak = np.hypot(hx, hy) < 1e-6
     hx[weak], hy[weak] = 1.0, 0.0
-    jit = np.radians(spec.leaf_jitter) * rng.uniform(-1.0, 1.0, (n, 3))
     yaw = np.arctan2(hy, hx)
     yaw += jit[:, 0]
     elev = np.radians(spec.tilt + (spec.tilt_top - spec.tilt) * rel_height)
@@ -345,23 +350,38 @@ def grow_plants(spec: PlantSpec, counts: NDArray[np.int64], scales: NDArray[np.f
     lv = place_nodes(spec, sk, counts, rng)
     n = len(lv.plant)
     var = spec.variation
-    size = (spec.leaf_size * scales[lv.plant] * (1.0 - spec.size_falloff * lv.along)
-            * (1.0 + var * rng.uniform(-1.0, 1.0, n)))
-    base = lv.node + (lv.radius + spec.petiole * size)[:, None] * lv.out
+    # the numbers first, in their order; then the leaves one by one, on two threads (in_two_threads)
+    spread = rng.uniform(-1.0, 1.0, n)
+    jit = np.radians(spec.leaf_jitter) * rng.uniform(-1.0, 1.0, (n, 3))   # the last number drawn here
+    size, base = np.empty(n), np.empty((n, 3))
+
+    def petiole_ends(a: int, b: int) -> None:
+        s = size[a:b] = (spec.leaf_size * scales[lv.plant[a:b]] * (1.0 - spec.size_falloff * lv.along[a:b])
+                         * (1.0 + var * spread[a:b]))
+        base[a:b] = lv.node[a:b] + (lv.radius[a:b] + spec.petiole * s)[:, None] * lv.out[a:b]
+
+    in_two_threads(n, petiole_ends)
     top = np.zeros(p_n)
     np.maximum.at(top, lv.plant, base[:, 2])
-    rel = np.clip(base[:, 2] / np.maximum(top[lv.plant], 1e-12), 0.0, 1.0)
-    columns = _orient(spec, lv, size, rel, rng)
+    rel = np.empty(n)
     m = np.zeros((n, 4, 4))
-    for c, col in enumerate(columns):   # scaled straight into the matrices, no (N, 3, 3) temporaries
-        for i in range(3):
-            np.multiply(col[i], size, out=m[:, i, c])
-    m[:, :3, 3] = base
-    m[:, 3, 3] = 1.0
-    low = _blade_low(m)                      # lift blades that would reach below the ground
-    margin = 0.02 * size
-    lift = np.maximum(margin - low, 0.0)
-    m[:, 2, 3] += lift
+
+    def blades(a: int, b: int) -> None:
+        """Leaves ``a:b``'s matrices: oriented, scaled, placed and lifted (leaf by leaf)."""
+        rel[a:b] = np.clip(base[a:b, 2] / np.maximum(top[lv.plant[a:b]], 1e-12), 0.0, 1.0)
+        part, s = m[a:b], size[a:b]
+        columns = _orient(spec, lv.out[a:b], lv.normal[a:b], rel[a:b], jit[a:b])
+        for c, col in enumerate(columns):   # scaled straight into the matrices, no (N, 3, 3) temporaries
+            for i in range(3):
+                np.multiply(col[i], s, out=part[:, i, c])
+        part[:, :3, 3] = base[a:b]
+        part[:, 3, 3] = 1.0
+        low = _blade_low(part)                   # lift blades that would reach below the ground
+        margin = 0.02 * s
+        lift = np.maximum(margin - low, 0.0)
+        part[:, 2, 3] += lift
+
+    in_two_threads(n, blades)
     placement = Placement(m, lv.plant.astype(np.int32), np.clip(lv.along, 0, 1).astype(np.float32),
                           rel.astype(np.float32), None, np.zeros((p_n, 3)))
     return _Grown(placement, sk, lv.node, 0.03 * size)
@@ -381,11 +401,32 @@ def stem_detail(n_leaves: int, n_plants: int) -> dict[str, tuple[int, int]]:
 
 def finish(grown: _Grown, origins: NDArray[np.float64], stems: bool) -> Placement:
     """Move plant ``i`` to ``origins[i]`` and build the stem mesh (if ``stems``)."""
-    pl, sk = grown.placement, grown.skeleton
+    pl, wait = finish_later(grown, origins, stems)
+    wait()
+    return pl
+
+
+def finish_later(grown: _Grown, origins: NDArray[np.float64], stems: bool
+                 ) -> tuple[Placement, Callable[[], None]]:
+    """:func:`finish`, the stem mesh of a large scene built on the worker thread
+    (:func:`~leafview.scene.stems.two_threads`): the placement (its leaves moved, its ``stems``
+    not yet set) and the call that waits for the mesh and sets them."""
+    pl = grown.placement
     pl.matrices[:, :3, 3] += origins[pl.plant]
     pl.plant_origins = pl.plant_origins + origins
     if not stems:
-        return pl
+        return pl, lambda: None
+    if not two_threads(len(pl)):
+        _stem_mesh(grown, origins)
+        return pl, lambda: None
+    pending = background(_stem_mesh, grown, origins)
+    return pl, lambda: pending.result()
+
+
+def _stem_mesh(grown: _Grown, origins: NDArray[np.float64]) -> None:
+    """The stem mesh of the placement ``grown`` moved to ``origins`` into its ``stems`` and
+    ``stem_ranges``."""
+    pl, sk = grown.placement, grown.skeleton
     detail = stem_detail(len(pl), len(origins))
     meshes, names = [], []
     for name, axes in (("trunks", sk.trunks), ("branches", sk.branches), ("twigs", sk.twigs)):
@@ -404,7 +445,6 @@ def finish(grown: _Grown, origins: NDArray[np.float64], stems: bool) -> Placemen
     mesh, ranges = merge_meshes(meshes)
     pl.stems = mesh
     pl.stem_ranges = dict(zip(names, ranges))
-    return pl
 
 
 # ---------------------------------------------------------------------------------------------
@@ -473,6 +513,16 @@ def scatter(layout: str, n_leaves: int, seed: int, spec: PlantSpec | None = None
 
     Plant scales vary by ±20 % by seed in fields and hedges.
     """
+    pl, wait = scatter_later(layout, n_leaves, seed, spec, plants, extent, stems)
+    wait()
+    return pl
+
+
+def scatter_later(layout: str, n_leaves: int, seed: int, spec: PlantSpec | None = None,
+                  plants: int | None = None, extent: float | None = None, stems: bool = True
+                  ) -> tuple[Placement, Callable[[], None]]:
+    """:func:`scatter` with the stem mesh of a large scene still being built on the worker thread
+    (:func:`finish_later`): the placement and the call that waits for its ``stems``."""
     if layout not in LAYOUTS:
         raise ParamError("layout", f"unknown layout {layout!r} (use {', '.join(LAYOUTS)})")
     spec = PlantSpec() if spec is None else spec
@@ -492,16 +542,16 @@ def scatter(layout: str, n_leaves: int, seed: int, spec: PlantSpec | None = None
     counts = split_counts(np.array([n]), (scales**2)[None, :])[0]
     grown = grow_plants(spec, counts, scales, rng)
     origins = _arrange(layout, grown.placement, scales, extent, rng)
-    return finish(grown, origins, bool(stems))
+    return finish_later(grown, origins, bool(stems))
 
 
 def _crown_x(pl: Placement, n_plants: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Per plant grown at the origin: smallest and largest x reached by its leaves."""
     lo = np.full(n_plants, np.inf)
     hi = np.full(n_plants, -np.inf)
-    x = pl.matrices[:, 0, 3]
-    np.minimum.at(lo, pl.plant, x - pl.sizes)
-    np.maximum.at(hi, pl.plant, x + pl.sizes)
+    x, size = pl.matrices[:, 0, 3], pl.sizes
+    np.minimum.at(lo, pl.plant, x - size)
+    np.maximum.at(hi, pl.plant, x + size)
     empty = ~np.isfinite(lo)
     if empty.any():
         lo[empty], hi[empty] = -0.5, 0.5

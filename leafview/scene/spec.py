@@ -73,7 +73,7 @@ from leafview.deform.surface import grid_uv, partials
 from leafview.deform.wind import WindSettings
 from leafview.resources import builtin_presets
 from leafview.scene.lighting import LightSettings
-from leafview.scene.plants import LEAVES_PER_PLANT, Placement, PlantSpec, scatter
+from leafview.scene.plants import LEAVES_PER_PLANT, Placement, PlantSpec, scatter_later
 from leafview.scene.scene_edits import SceneEdit, apply_edits, parse_edits
 from leafview.scene.variety import (
     Variety,
@@ -519,8 +519,9 @@ def _tinted(colour: Vec3, t: float) -> Vec3:
 def build_scene(spec: SceneSpec) -> Scene:
     """Expand ``spec`` (deterministic: the same spec gives the same arrays)."""
 
-    placement = scatter(spec.layout, spec.leaves, spec.seed, spec.plant_spec(),
-                        plants=spec.plants or None, stems=spec.stems)
+    # the stem mesh of a large scene is built on a second thread while the numbers below are drawn
+    placement, stems_done = scatter_later(spec.layout, spec.leaves, spec.seed, spec.plant_spec(),
+                                          plants=spec.plants or None, stems=spec.stems)
     n = len(placement)
     rng = np.random.default_rng([spec.seed, 0x5CE4E])
     n_plants = int(placement.plant.max(initial=-1)) + 1
@@ -549,6 +550,7 @@ def build_scene(spec: SceneSpec) -> Scene:
     species = tuple(s.replace(transform=Transform()) for s in spec.species)
     # per-leaf variety: drawn after every other number, so scenes without it keep theirs
     ripple_phase, ripple_scale, load_scale = draw_variety(rng, species_id, spec.varieties)
+    stems_done()
     scene = Scene(spec, species, species_id.astype(np.int32), factors, tint,
                   np.asarray(placement.matrices, np.float64), placement.stems, placement,
                   ripple_phase=ripple_phase, ripple_scale=ripple_scale, load_scale=load_scale)

@@ -22,9 +22,12 @@ drift along a curved axis, which is what keeps phyllotactic divergence angles ex
 from __future__ import annotations
 
 import math
+import os
+import threading
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, fields
-from typing import Protocol
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -39,6 +42,74 @@ GOLDEN_ANGLE = 360.0 * (1.0 - 2.0 / (1.0 + math.sqrt(5.0)))     # 137.5077...°
 F64 = NDArray[np.float64]
 AlongOf = Callable[[NDArray[np.int64], F64], F64]   # (axis, arc parameter) -> position along the leafy part
 Mesh3 = tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.uint32]]
+
+
+# ---------------------------------------------------------------------------------------------
+# two threads for the leaf-by-leaf arithmetic of large scenes
+PARALLEL_MIN = 100_000   # items from which in_two_threads uses a second thread
+_T = TypeVar("_T")
+_POOL: ThreadPoolExecutor | None = None
+_WORKERS: set[threading.Thread] = set()
+_POOL_LOCK = threading.Lock()
+
+
+def _forget_pool() -> None:
+    """In a forked child: the parent's worker thread is not there; the next task starts a new one."""
+    global _POOL, _POOL_LOCK
+    _POOL, _POOL_LOCK = None, threading.Lock()
+    _WORKERS.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pool)
+
+
+def background(fn: Callable[..., _T], *args: Any) -> Future[_T]:
+    """``fn(*args)`` on the build's worker thread (one, started on first use; numpy releases the
+    interpreter lock in its array loops, so the two run on two cores)."""
+    global _POOL
+    with _POOL_LOCK:
+        if _POOL is None:
+            _POOL = ThreadPoolExecutor(max_workers=1, thread_name_prefix="leafview-build",
+                                       initializer=lambda: _WORKERS.add(threading.current_thread()))
+        return _POOL.submit(fn, *args)
+
+
+def two_threads(n: int) -> bool:
+    """Whether work on ``n`` items goes to two threads: from :data:`PARALLEL_MIN` items, with more
+    than one CPU, and not already on the worker (which would wait for itself)."""
+    return n >= PARALLEL_MIN and (os.cpu_count() or 1) > 1 and threading.current_thread() not in _WORKERS
+
+
+def in_two_threads(n: int, work: Callable[[int, int], object], pieces: int = 4) -> None:
+    """``work(a, b)`` over ``0:n`` in ``pieces`` runs, taken in turn by the calling thread and the
+    worker thread where :func:`two_threads` (so that a thread slowed by other processes on its
+    core takes fewer), else ``work(0, n)``. ``work`` must treat items one by one (elementwise
+    numpy, gathers, reductions within an item, results written to disjoint rows), so that the
+    numbers do not depend on the split, and must draw no random numbers (they are drawn before,
+    in order)."""
+    if not two_threads(n):
+        work(0, n)
+        return
+    edges = [n * k // pieces for k in range(pieces + 1)]
+    runs = iter(range(pieces))
+    lock = threading.Lock()
+
+    def take() -> None:
+        while True:
+            with lock:
+                k = next(runs, None)
+            if k is None:
+                return
+            work(edges[k], edges[k + 1])
+
+    other = background(take)
+    try:
+        take()
+    finally:
+        other.result()
+
+
 _EPS = 1e-12
 _Z_UP = np.array([0.0, 0.0, 1.0])
 
@@ -379,15 +450,31 @@ def grow_skeleton(spec: PlantArchitecture, scales: F64, twigs: int, rng: np.rand
     az_tw = side * np.radians(75.0) + 0.5 * jig(a_n, twigs)
     polar_tw = np.radians(spec.twig_angle) * (1.0 + jig(a_n, twigs))
     owner = np.repeat(np.arange(a_n), twigs)
-    p1, r1, t1, n1, b1 = branches.sample(owner, t_tw.ravel())
-    d1 = _out(t1, n1, b1, polar_tw.ravel(), az_tw.ravel())
     tw_len = (spec.twig_length * length[:, None] * (1.0 - 0.5 * t_tw) * (1.0 + jig(a_n, twigs))).ravel()
-    tw_bend = spec.gravitropism * _Z_UP + 0.5 * jig(a_n * twigs, 3)
+    tw_bend = spec.gravitropism * _Z_UP + 0.5 * jig(a_n * twigs, 3)   # the last number drawn here
     plant = branches.plant[owner]
-    sp_tw = grow_spines(p1, d1, tw_bend, tw_len, TWIG_SEGMENTS, clearance[plant])
     s_tw = np.linspace(0.0, 1.0, TWIG_SEGMENTS + 1)
-    tw_r = (0.5 * r1)[:, None] * (1.0 - 0.6 * s_tw)[None, :]
-    return Skeleton(trunks, branches, _axes(sp_tw, tw_r, tw_len, plant, owner, t_tw.ravel()))
+    # every twig on its own from here: on two threads (in_two_threads), into these arrays
+    tw_n = len(owner)
+    sp_tw = np.empty((tw_n, TWIG_SEGMENTS + 1, 3))
+    tw_r = np.empty((tw_n, TWIG_SEGMENTS + 1))
+    frames = [np.empty((tw_n, TWIG_SEGMENTS, 3)) for _ in range(3)]
+
+    def grow_twigs(a0: int, a1: int) -> None:
+        p1, r1, t1, n1, b1 = branches.sample(owner[a0:a1], t_tw.ravel()[a0:a1])
+        d1 = _out(t1, n1, b1, polar_tw.ravel()[a0:a1], az_tw.ravel()[a0:a1])
+        sp = sp_tw[a0:a1] = grow_spines(p1, d1, tw_bend[a0:a1], tw_len[a0:a1], TWIG_SEGMENTS,
+                                        clearance[plant[a0:a1]])
+        tw_r[a0:a1] = (0.5 * r1)[:, None] * (1.0 - 0.6 * s_tw)[None, :]
+        t = segment_tangents(sp)
+        n, b = transport_frames(t, reference_normals(t[:, 0]))
+        for dst, src in zip(frames, (t, n, b)):
+            dst[a0:a1] = src
+
+    in_two_threads(tw_n, grow_twigs)
+    twig_axes = Axes(sp_tw, tw_r, frames[0], frames[1], frames[2], np.asarray(tw_len, np.float64),  # as _axes
+                     np.asarray(plant, np.int64), np.asarray(owner, np.int64), np.asarray(t_tw.ravel(), np.float64))
+    return Skeleton(trunks, branches, twig_axes)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -457,17 +544,27 @@ def nodes_on(axes: Axes, counts: NDArray[np.int64], s0: float, spec: PlantArchit
     k = spec.per_node
     axis = np.repeat(np.arange(len(axes)), counts)
     start = np.cumsum(counts) - counts
-    i = np.arange(len(axis)) - start[axis]
     nodes = -(-counts // k)
-    j, slot = i // k, i % k
-    s = s0 + (1.0 - s0) * (j + 0.5) / np.maximum(nodes[axis], 1)
-    phase = rng.uniform(0.0, 360.0, len(axes))
-    azimuth = np.radians(phase[axis] + j * divergence(spec) + slot * (360.0 / k))
-    p, r, t, n, b = axes.sample(axis, s)
+    phase = rng.uniform(0.0, 360.0, len(axes))   # the only number drawn: the leaves below on two threads
     sp = math.sin(math.radians(spec.petiole_angle))
     cp = math.cos(math.radians(spec.petiole_angle))
-    out = cp * t + sp * (np.cos(azimuth)[:, None] * n + np.sin(azimuth)[:, None] * b)
-    return Nodes(axes.plant[axis], p, out, r, along_of(axis, s), n)
+    n_leaves = len(axis)
+    node, out, normal = np.empty((n_leaves, 3)), np.empty((n_leaves, 3)), np.empty((n_leaves, 3))
+    radius, along = np.empty(n_leaves), np.empty(n_leaves)
+
+    def leaves(a0: int, a1: int) -> None:
+        ax = axis[a0:a1]
+        i = np.arange(a0, a1) - start[ax]
+        j, slot = i // k, i % k
+        s = s0 + (1.0 - s0) * (j + 0.5) / np.maximum(nodes[ax], 1)
+        azimuth = np.radians(phase[ax] + j * divergence(spec) + slot * (360.0 / k))
+        p, r, t, n, b = axes.sample(ax, s)
+        node[a0:a1], radius[a0:a1], normal[a0:a1] = p, r, n
+        out[a0:a1] = cp * t + sp * (np.cos(azimuth)[:, None] * n + np.sin(azimuth)[:, None] * b)
+        along[a0:a1] = along_of(ax, s)
+
+    in_two_threads(n_leaves, leaves)
+    return Nodes(axes.plant[axis], node, out, radius, along, normal)
 
 
 def place_nodes(spec: PlantArchitecture, sk: Skeleton, counts: NDArray[np.int64], rng: np.random.Generator) -> Nodes:
@@ -496,5 +593,12 @@ def place_nodes(spec: PlantArchitecture, sk: Skeleton, counts: NDArray[np.int64]
     if len(parts) == 1:
         return parts[0]
     order = np.argsort(np.concatenate([q.plant for q in parts]), kind="stable")
-    cat = lambda name: np.concatenate([getattr(q, name) for q in parts])[order]  # noqa: E731
-    return Nodes(*(cat(f.name) for f in fields(Nodes)))
+    merged = [np.concatenate([getattr(q, f.name) for q in parts]) for f in fields(Nodes)]
+    sorted_ = [np.empty_like(m) for m in merged]
+
+    def gather(a: int, b: int) -> None:
+        for m, dst in zip(merged, sorted_):
+            np.take(m, order[a:b], axis=0, out=dst[a:b])
+
+    in_two_threads(len(order), gather)
+    return Nodes(*sorted_)
