@@ -151,25 +151,25 @@ def test_too_many_leaves_refused():
 @pytest.mark.parametrize("layout", ["field", "hedge", "plant"])
 def test_two_threads_give_the_bytes_of_one(presets, monkeypatch, layout):
     """A large scene builds its twigs, nodes, leaf frames and stem mesh and packs its rows on two
-    threads (leafview.scene.stems.in_two_threads): the same bytes as on one thread."""
+    threads (leafview.scene.threads.in_two_threads): the same bytes as on one thread."""
     import leafview.scene.plants as plants
-    import leafview.scene.stems as stems
+    import leafview.scene.threads as threads
     from leafview.gpu.scene import pack_rows, pack_scene, species_tables
 
     spec = _spec(presets, n=3001, layout=layout, plants=1 if layout == "plant" else 9, colour_variation=0.1)
-    monkeypatch.setattr(stems, "PARALLEL_MIN", 10**12)
+    monkeypatch.setattr(threads, "PARALLEL_MIN", 10**12)
     one = build_scene(spec)
     used: list[object] = []
-    spy = stems.background
+    spy = threads.background
 
     def counted(fn, *args):
         used.append(fn)
         return spy(fn, *args)
 
-    monkeypatch.setattr(stems, "background", counted)
+    monkeypatch.setattr(threads, "background", counted)
     monkeypatch.setattr(plants, "background", counted)
-    monkeypatch.setattr(stems, "PARALLEL_MIN", 7)
-    monkeypatch.setattr(stems.os, "cpu_count", lambda: 2)
+    monkeypatch.setattr(threads, "PARALLEL_MIN", 7)
+    monkeypatch.setattr(threads.os, "cpu_count", lambda: 2)
     two = build_scene(spec)
     assert len(used) >= 5   # twigs (where the layout has them), nodes, sort, petiole ends, blades, stems
     for name in ("matrices", "factors", "tint", "species_id"):

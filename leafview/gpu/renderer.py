@@ -85,10 +85,6 @@ _MAX_ATLAS = 4096     # atlas side limit in pixels (well inside GL_MAX_RENDERBUF
 DRAW_VARYINGS = (*WORLD_VARYINGS, "v_uv", "v_rib")
 DRAW_VERTEX_FORMAT = "3f 3f 2f 2f"
 DRAW_VERTEX_BYTES = 40
-# the blocks' dtypes and sizes, built once (Block.dtype builds a new dtype at each access)
-_LEAF_BYTES = LEAF_BLOCK.nbytes
-_FRAME_DTYPE = FRAME_BLOCK.dtype
-_FRAME_BYTES = _FRAME_DTYPE.itemsize
 _COMMAND = np.dtype([("count", "<u4"), ("instances", "<u4"), ("first_index", "<u4"), ("base_vertex", "<i4"),
                      ("base_instance", "<u4")])   # DrawElementsIndirectCommand
 
@@ -399,7 +395,7 @@ class LeafRenderer:
         if keys:
             self.ripples.update(keys)  # one batched dispatch for every signal that changed
         leaf_rows, leaf_stride = self._write_records(self._batch_leaf, records)
-        if leaf_stride == _LEAF_BYTES:   # tightly packed (llvmpipe: a 16-byte alignment): one dispatch
+        if leaf_stride == LEAF_BLOCK.nbytes:   # tightly packed (llvmpipe: a 16-byte alignment): one dispatch
             self.prepare.run(leaf_rows, n)
         else:   # rows sit at the uniform-offset alignment: one small dispatch each
             for i in range(n):
@@ -413,13 +409,13 @@ class LeafRenderer:
         self.batch_veins.use()
         self.batch_lobes.use()
         self.frame.bind()   # the capture computes gl_Position too (discarded)
-        leaf_bytes, frame_bytes = _LEAF_BYTES, _FRAME_BYTES
+        leaf_bytes, frame_bytes = LEAF_BLOCK.nbytes, FRAME_BLOCK.nbytes
         with self.resources.capture.recording(n * nverts, DRAW_VERTEX_BYTES) as rec:
             # 1. the only vertex-shader pass over the leaves: capture, frame each camera on it
             for i in range(n):
                 leaf_rows.bind_to_uniform_block(LEAF_BINDING, offset=i * leaf_stride, size=leaf_bytes)
                 rec.add(points, nverts)
-            frames = np.zeros(n, dtype=_FRAME_DTYPE)
+            frames = np.zeros(n, dtype=FRAME_BLOCK.dtype)
             if camera is not None:
                 fill_frame(frames[0], camera, srgb=not linear, flat=flat, size=(w, h))
                 frames[1:] = frames[0]

@@ -100,7 +100,7 @@ from leafview.gpu.vein_draw import VeinDraw, fresh_layers
 from leafview.resources import resolve_preset
 from leafview.scene.camera import Camera, top_down
 from leafview.scene.spec import VBAR_GAP, Scene, SceneSpec
-from leafview.scene.stems import in_two_threads
+from leafview.scene.threads import in_two_threads
 from leafview.scene.variety import interpolate_bend, load_table, sphere_padding
 
 __all__ = ["LOD_GRIDS", "CullSettings", "SceneRenderer", "SceneLimitError", "pack_scene", "species_cull", "plan_batches",
@@ -310,7 +310,7 @@ def pack_scene(scene: Scene, start: int = 0, stop: int | None = None,
 
 def pack_rows(scene: Scene, start: int, stop: int, species_records: NDArray[Any], out: NDArray[Any]) -> NDArray[Any]:
     """:func:`pack_scene` of leaves ``start:stop`` into ``out``, a large run on two threads
-    (:func:`leafview.scene.stems.in_two_threads`; rows are packed one by one, so the bytes are
+    (:func:`leafview.scene.threads.in_two_threads`; rows are packed one by one, so the bytes are
     those of one call)."""
     rows = out[:stop - start]
     in_two_threads(stop - start, lambda a, b: pack_scene(scene, start + a, start + b, species_records, out=rows[a:b]))

@@ -48,16 +48,14 @@ from leafview.scene.stems import (
     Mesh3,
     Skeleton,
     auto_twigs,
-    background,
     divergence,
     grow_skeleton,
-    in_two_threads,
     merge_meshes,
     place_nodes,
     split_counts,
     sweep_tubes,
-    two_threads,
 )
+from leafview.scene.threads import background, in_two_threads, two_threads
 
 __all__ = ["PlantSpec", "Placement", "grow_plant", "scatter", "PHYLLOTAXIS", "LAYOUTS",
            "GOLDEN_ANGLE", "divergence", "PETIOLE_LIMIT", "PETIOLE_SIDES", "LEAF_BOX", "PLANT_RANGES",
@@ -409,7 +407,7 @@ def finish(grown: _Grown, origins: NDArray[np.float64], stems: bool) -> Placemen
 def finish_later(grown: _Grown, origins: NDArray[np.float64], stems: bool
                  ) -> tuple[Placement, Callable[[], None]]:
     """:func:`finish`, the stem mesh of a large scene built on the worker thread
-    (:func:`~leafview.scene.stems.two_threads`): the placement (its leaves moved, its ``stems``
+    (:func:`~leafview.scene.threads.two_threads`): the placement (its leaves moved, its ``stems``
     not yet set) and the call that waits for the mesh and sets them."""
     pl = grown.placement
     pl.matrices[:, :3, 3] += origins[pl.plant]
