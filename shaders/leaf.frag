@@ -31,7 +31,6 @@
 // becomes a one-pixel ramp around 0.5 (fwidth) written as the sample mask instead of a discard.
 #include "generated/frame_block.glsl"
 #include "color.glsl"
-#include "leaf_srgb.glsl"
 
 in vec3 v_world;
 in vec3 v_normal;
@@ -312,7 +311,7 @@ void main() {
         color += key_fill(n, view, albedo, translucency, sheen, lobe);
 #endif
     }
-    frag_color = vec4(frame.flags.x != 0 ? leaf_srgb(color) : color, 1.0);
+    frag_color = vec4(frame.flags.x != 0 ? linear_to_srgb(color) : color, 1.0);
 #endif
 }
 #endif

@@ -1,5 +1,6 @@
-"""leaf.frag's sRGB encoding (shaders/leaf_srgb.glsl) read back through transform feedback and
-compared with its numpy twin, leafview.core.colour.linear_to_srgb, and with color.glsl's pow()."""
+"""The shaders' sRGB encoding (color.glsl's linear_to_srgb, frexp and a polynomial) read back through
+transform feedback and compared with its numpy twin, leafview.core.colour.linear_to_srgb, and with
+the pow() form of the transfer function it replaced."""
 
 import shutil
 
@@ -14,22 +15,24 @@ pytestmark = pytest.mark.gl
 
 VERT = """#version 450
 #include "color.glsl"
-#include "leaf_srgb.glsl"
+vec3 pow_srgb(vec3 c) {   // the transfer function with pow(), as the shaders had it before
+    c = clamp(c, 0.0, 1.0);
+    return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(vec3(0.0031308), c));
+}
 in float x;
 out vec3 fast;
 out vec3 exact;
 void main() {
     vec3 c = vec3(x, 0.5 * x, 1.0 - x);
-    fast = leaf_srgb(c);
-    exact = linear_to_srgb(c);
+    fast = linear_to_srgb(c);
+    exact = pow_srgb(c);
     gl_Position = vec4(0.0);
 }
 """
 
 
 def _encode(gl, tmp_path, x):
-    for name in ("color.glsl", "leaf_srgb.glsl"):
-        shutil.copy(shader_dir() / name, tmp_path / name)
+    shutil.copy(shader_dir() / "color.glsl", tmp_path / "color.glsl")
     (tmp_path / "t.vert").write_text(VERT)
     ctx = gl.ctx
     prog = build_program(ctx, "t.vert", None, varyings=("fast", "exact"), root=tmp_path)
