@@ -529,7 +529,9 @@ def leaf_outline(photo: Photo | Any, *, base: ArrayLike | None = None, apex: Arr
 
     cy, cx = seg.corner
     grey = work[cy:cy + seg.crop.shape[0], cx:cx + seg.crop.shape[1]] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
-    shape: Shape = leaf_shape(seg.crop, fine=fine, f=f, grey=grey, base=to_crop(base_px), apex=to_crop(apex_px))
+    colour = photo.rgb[y0:y0 + fine.shape[0], x0:x0 + fine.shape[1]]
+    shape: Shape = leaf_shape(seg.crop, fine=fine, f=f, grey=grey, base=to_crop(base_px), apex=to_crop(apex_px),
+                              colour=colour)
     mask, blade = np.zeros((h, w), bool), np.zeros((h, w), bool)
     window = np.s_[y0:y0 + fine.shape[0], x0:x0 + fine.shape[1]]
     mask[window], blade[window] = fine, shape.blade

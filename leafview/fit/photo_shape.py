@@ -48,7 +48,10 @@
   half-chord reaches four times the petiole's half-width (over at most :data:`BASE_RUN` of the
   extent, back at most :data:`BASE_BACK`: a long narrow wedge), whichever reaches farther. A
   rounded or cordate base widens at once (more than a petiole half-width within three pixels) and
-  stays put.
+  stays put, unless the walk ran between two lobes before it (:func:`_flanked`): then the petiole
+  may run on in a sinus narrower than itself, whose walls meet over it beyond where the mask
+  shows, and where the photo's colours are known its end is followed by its colour
+  (:func:`_hidden_base`).
 * **Base without a petiole.** The blade's principal axis (through its centroid) meets the
   outline at two ends; on a blade wider than long the midrib runs across that axis, which the
   veins tell (:func:`_vein_sense` clear across it and :data:`VEIN_TURN` times clearer than
@@ -63,9 +66,16 @@
   that is a stalk where the other tapers (:func:`_stalk_end`: a petiole too wide to be found as
   one), with a warning; else the end nearer the widest part (most leaves are widest below the
   middle), with a warning.
+  A roundish blade (principal standard deviations within :data:`SINUS_ROUND`) with one sinus
+  deeper than :data:`SINUS_DEEP` of its extent inside its convex hull, none half as deep a quarter
+  of the extent away (:func:`_lone_sinus`), has its base there, wherever its principal axis runs
+  (a round cordate blade's axis is a guess; it was found across the sinus).
   The base itself is the notch's sinus; else the outline point farthest from the apex, unless that
   lies more than :data:`SHOULDER` of the width off the axis (a shoulder of a truncate base), where
-  the axis' crossing is used; a petiole stub too short to be found as a petiole is walked back
+  the axis' crossing is used, or more than that off the line from the apex through the
+  centroid while that line leaves the blade nearly as far from the apex (at least
+  :data:`OBLIQUE_REACH` of the way: a corner of an oblique truncate base), where that line's exit
+  is used; a petiole stub too short to be found as a petiole is walked back
   to where the blade widens it (:func:`_stub_root`); a pointed base is followed on along its
   taper as the apex is (:func:`_taper_tip`). A nearly round blade (principal axes within 15 %)
   gets a warning: its axis, so its ends, are a guess.
@@ -123,6 +133,10 @@ PETIOLE_TURN = 60.0           # degrees: a petiole running more off the base-ape
 BASE_EXTRAPOLATION = 1.0      # of the distance back to zero width at the blade's first slope
 BASE_RUN = 0.1               # the mean growth is read from twice to four times the petiole's half-width, over at most this of the extent
 BASE_BACK = 0.25             # the extrapolation reaches back at most this of the extent
+SLIT_FLANKED = 0.5           # a petiole between lobes: the mask met again on each side at this share of the walk before the blade
+SLIT_REACH = 0.1             # its colour followed at most this far (of the extent) into the sinus
+SLIT_CONTRAST = 1.5          # the petiole's colour differs from the blade's by more than this of the blade's median deviation
+SLIT_BLUR = 0.5              # px: the Gaussian blur of the colours compared there (the thin end of the strip not lost to it)
 TIP_REACH = 0.06             # the tip's width is read this far (of the length) behind the apex
 TIP_BLUR = 3.0               # working pixels: narrower parts of the tip are not measured
 TIP_SLOPE = 0.8              # a tip widening faster than this (width per length) is blunt: it stays
@@ -138,6 +152,9 @@ VEIN_TURN_ELONGATION = 2.0    # ... on a blade whose principal standard deviatio
 STALK_NEAR, STALK_FAR = 0.03, 0.09  # of the extent from an end: where a stalk's width is compared
 STALK_EVEN = 0.75             # a stalk's near width / its far width, at least
 SHOULDER = 1 / 3              # farthest point off the axis by this much of the width: a truncate base
+OBLIQUE_REACH = 0.96          # the line from the apex through the centroid leaves a truncate base this far, at least (of the corner's distance)
+SINUS_ROUND = 1.3             # a blade whose principal standard deviations differ less than this ...
+SINUS_DEEP = 0.06             # ... with one sinus this deep (of its extent) inside its convex hull: that is the base
 ROUND_BLADE = 1.15            # principal standard deviations closer than this: a round blade
 NOTCH_DEPTH = 0.02            # of the blade's length
 BLUNT_DISTANCE = 0.01         # outline points this close (of the distance) to the farthest from the base ...
@@ -495,9 +512,71 @@ def _gap(half: Array, begin: int, rho: float) -> int:
     return int(np.count_nonzero(half[begin:len(half) if wide is None else wide] == 0))
 
 
-def _petiole_base(mask: NDArray[np.bool_], pet: _Petiole, extent: float,
-                  base: Array | None) -> tuple[Array, Array, Array]:
-    """(base, petiole polyline from its free end to the base, unit direction into the blade)."""
+def _flanked(mask: NDArray[np.bool_], pts: Array, tan: Array, reach: float) -> bool:
+    """Whether, at most of the walk's ``pts`` (x, y; ``tan`` their unit tangents), the mask is
+    left on both sides and met again within ``reach``: a petiole running between two lobes."""
+    ts = np.arange(0.0, reach + 0.25, 0.5)
+    normals = np.stack([-tan[:, 1], tan[:, 0]], axis=1)
+    for sign in (1.0, -1.0):
+        xy = pts[:, None, :] + sign * ts[None, :, None] * normals[:, None, :]
+        inside = ndimage.map_coordinates(mask, [xy[..., 1], xy[..., 0]], order=0, mode="constant", cval=0).astype(bool)
+        left = np.argmin(inside, axis=1)
+        again = (inside & (np.arange(len(ts))[None, :] > left[:, None])).any(axis=1) & ~inside.all(axis=1)
+        if again.mean() < SLIT_FLANKED:
+            return False
+    return True
+
+
+def _hidden_base(colour: NDArray[np.floating], mask: NDArray[np.bool_], pts: Array, tan: Array, i: int,
+                 start: int, rho: float, extent: float) -> Array | None:
+    """Where a petiole lying in a narrow cordate sinus ends, the sinus' walls meeting over it
+    beyond where the mask shows (the walk ``pts`` first widens at index ``i``; ``start`` is where
+    its even part begins), or None: the farthest pixel ahead of the petiole's colour (closer to
+    its median colour along the walk than to the blade's median round it, after a Gaussian blur of
+    :data:`SLIT_BLUR` px), connected to the walk at ``i`` within a corridor widening at 1:2 from
+    the petiole's width, at most :data:`SLIT_REACH` of the extent ahead. None too where the two
+    colours differ by less than :data:`SLIT_CONTRAST` times the blade's median deviation from its own."""
+    reach = int(SLIT_REACH * extent + 4 * rho) + 2
+    cx, cy = (int(round(v)) for v in pts[i])
+    y0, x0 = max(cy - reach, 0), max(cx - reach, 0)
+    win = np.s_[y0:cy + reach + 1, x0:cx + reach + 1]
+    m = mask[win]
+    rgb = np.stack([ndimage.gaussian_filter(np.asarray(colour[win + (c,)], np.float32), SLIT_BLUR) for c in range(3)],
+                   axis=-1)
+    along = np.rint(pts[start:max(start + 1, i - int(rho) - 2)] - (x0, y0)).astype(int)
+    ok = (along >= 0).all(1) & (along[:, 0] < m.shape[1]) & (along[:, 1] < m.shape[0])
+    if ok.sum() < 3:
+        return None
+    own = np.median(rgb[along[ok, 1], along[ok, 0]], axis=0)
+    yy, xx = np.mgrid[:m.shape[0], :m.shape[1]]
+    d = tan[i]
+    rx, ry = xx + x0 - pts[i][0], yy + y0 - pts[i][1]
+    ahead, lat = rx * d[0] + ry * d[1], ry * d[0] - rx * d[1]
+    ring = m & (np.hypot(ahead, lat) > 4 * rho + 2) & (ahead > 0)
+    if ring.sum() < 10:
+        return None
+    blade = np.median(rgb[ring], axis=0)
+    spread = float(np.median(np.linalg.norm(rgb[ring] - blade, axis=-1)))
+    if float(np.linalg.norm(own - blade)) <= SLIT_CONTRAST * spread:
+        return None                       # the petiole's colour is not told from the blade's
+    like = (m & (np.linalg.norm(rgb - own, axis=-1) < np.linalg.norm(rgb - blade, axis=-1))
+            & (np.abs(lat) <= rho + 2 + 0.5 * np.maximum(ahead, 0)) & (ahead > -2 * rho - 2)
+            & (ahead <= SLIT_REACH * extent))
+    lab, _ = ndimage.label(like)
+    r, c = (int(round(v)) for v in pts[i - 1][::-1] - (y0, x0))
+    if not (0 <= r < m.shape[0] and 0 <= c < m.shape[1]) or lab[r, c] == 0:
+        return None
+    k = int(np.argmax(np.where(lab == lab[r, c], ahead, -np.inf)))
+    if ahead.flat[k] <= 0:
+        return None
+    return np.array([xx.flat[k] + x0, yy.flat[k] + y0], np.float64)
+
+
+def _petiole_base(mask: NDArray[np.bool_], pet: _Petiole, extent: float, base: Array | None,
+                  colour: NDArray[np.floating] | None = None) -> tuple[Array, Array, Array]:
+    """(base, petiole polyline from its free end to the base, unit direction into the blade).
+    ``colour`` (the photo aligned with ``mask``, RGB), where given, finds a petiole's end hidden in a
+    narrow cordate sinus (:func:`_hidden_base`)."""
     rho = max(pet.radius, 0.75)
     odd = np.nonzero((pet.radii > 1.5 * rho + 0.5) | (pet.radii < min(0.75 * rho, rho - 1)))[0]
     odd = odd[odd >= len(pet.radii) // 3]          # where the centre line leaves the even petiole
@@ -531,6 +610,13 @@ def _petiole_base(mask: NDArray[np.bool_], pet: _Petiole, extent: float,
             if slope > 0:
                 back_px = max(back_px, min(BASE_EXTRAPOLATION * half[i] / slope, cap))
         k = max(0, i - int(round(back_px)))
+        flank = pts[max(i - int(3 * rho) - 3, 0):i], tan[max(i - int(3 * rho) - 3, 0):i]
+        if (colour is not None and wide_at is not None and i > 3 and half[i] - half[i - 3] > rho
+                and len(flank[0]) >= 3 and _flanked(mask, *flank, 8 * rho + 4)):
+            hidden = _hidden_base(colour, mask, pts, tan, i, start, rho, extent)
+            if hidden is not None:        # the petiole's end in a narrow cordate sinus
+                line = np.vstack([approximate_polygon(pts[:k + 1], tolerance=0.3), hidden[None]])
+                return hidden, line, tan[k]
     else:
         k = int(np.argmin(np.hypot(*(pts - base).T)))
     found = pts[k] if base is None else base
@@ -632,13 +718,30 @@ def _stalk_end(s: Array, lat: Array, extent: float, step: float) -> int | None:
     return None if even[0] == even[1] else (0 if even[0] else 1)
 
 
+def _lone_sinus(contour: Array, hull: Array, extent: float) -> Array | None:
+    """The deepest contour point inside the convex hull (``hull``: its facet equations) where it
+    lies deeper than :data:`SINUS_DEEP` of ``extent`` and no point farther than a quarter of
+    ``extent`` from it lies half as deep (one sinus, not lobes), else None."""
+    inside = -np.max(contour @ hull[:, :2].T + hull[:, 2], axis=1)
+    k = int(np.argmax(inside))
+    if inside[k] <= SINUS_DEEP * extent:
+        return None
+    away = np.hypot(*(contour - contour[k]).T) > 0.25 * extent
+    if away.any() and float(inside[away].max()) >= 0.5 * float(inside[k]):
+        return None
+    return np.asarray(contour[k], np.float64).copy()
+
+
 def _base_without_petiole(contour: Array, centre: Array, axis: Array, apex: Array | None, step: float,
-                          veins: float) -> tuple[Array, str | None]:
+                          veins: float, elongation: float = np.inf) -> tuple[Array, str | None]:
     """The base of a blade with no petiole (module docstring) and a warning when it is a guess.
-    ``veins`` is :func:`_vein_sense` (positive: the apex lies towards +axis)."""
+    ``veins`` is :func:`_vein_sense` (positive: the apex lies towards +axis); ``elongation`` the
+    ratio of the blade's principal standard deviations."""
     s, lat = _frame(contour, centre, axis)
     extent = float(s.max() - s.min())
     hull = ConvexHull(contour).equations
+    if apex is None and elongation < SINUS_ROUND and (sinus := _lone_sinus(contour, hull, extent)) is not None:
+        return sinus, None                            # a roundish blade's one deep sinus, wherever its axis runs
     (lo, dlo), (hi, dhi) = _end_point(contour, s, lat, True, hull), _end_point(contour, s, lat, False, hull)
     ends, notch = [lo, hi], [dlo, dhi]
     near = [_width_at(s, lat, float(s.min()) + 0.1 * extent, step), _width_at(s, lat, float(s.max()) - 0.1 * extent, step)]
@@ -669,10 +772,28 @@ def _base_without_petiole(contour: Array, centre: Array, axis: Array, apex: Arra
     widest = max(_width_at(s, lat, x, step) for x in np.linspace(s.min(), s.max(), 21)[1:-1])
     if abs(float((far - centre) @ np.array([-axis[1], axis[0]]))) > SHOULDER * widest:
         return ends[b], note                          # that is a shoulder of a truncate base: its middle
+    ray = centre - tip
+    ray /= max(float(np.hypot(*ray)), 1e-9)
+    if abs(float((far - tip) @ np.array([-ray[1], ray[0]]))) > SHOULDER * widest:
+        mid = _ray_exit(contour, tip, ray)
+        if float(np.hypot(*(mid - tip))) >= OBLIQUE_REACH * float(np.hypot(*(far - tip))):
+            return mid, note                          # a corner of an oblique truncate base: the midrib's end
     stub = _stub_root(contour, tip, far, widest, step)
     if stub is not None:
         return stub, note                             # a petiole stub too short to be found as a petiole
     return _taper_tip(contour, tip, far, step), note  # a wedge's point thinner than the segmentation resolves
+
+
+def _ray_exit(contour: Array, origin: Array, ray: Array) -> Array:
+    """The farthest point where the line from ``origin`` along the unit ``ray`` crosses the contour."""
+    s, lat = _frame(contour, origin, ray)
+    nxt = np.roll(np.arange(len(contour)), -1)
+    cross = np.nonzero((np.sign(lat) != np.sign(lat[nxt])) & (s > 0))[0]
+    if len(cross) == 0:
+        return contour[int(np.argmax(np.where(s > 0, s - np.abs(lat), -np.inf)))].copy()
+    w = lat[cross] / np.where(lat[cross] == lat[nxt[cross]], 1.0, lat[cross] - lat[nxt[cross]])
+    j = int(np.argmax(s[cross] + w * (s[nxt[cross]] - s[cross])))
+    return np.asarray(contour[cross[j]] + w[j] * (contour[nxt[cross[j]]] - contour[cross[j]]), np.float64)
 
 
 def _stub_root(contour: Array, apex: Array, end: Array, widest: float, f: float) -> Array | None:
@@ -809,8 +930,9 @@ def _up(mask: NDArray[np.bool_], f: int, shape: tuple[int, int]) -> NDArray[np.b
 
 
 def _landmarks(mask: NDArray[np.bool_], fine: NDArray[np.bool_], f: int, grey: NDArray[np.float32] | None,
-               pet: _Petiole | None, extent: float, base: Array | None,
-               apex: Array | None) -> tuple[NDArray[np.bool_], Array, Array, Array, Array, list[str]]:
+               pet: _Petiole | None, extent: float, base: Array | None, apex: Array | None,
+               colour: NDArray[np.floating] | None = None) -> tuple[NDArray[np.bool_], Array, Array, Array, Array,
+                                                                    list[str]]:
     """(blade at ``fine``'s resolution, petiole line, contour, base, apex, warnings) of the leaf
     ``mask`` with the petiole ``pet`` (or none), as :func:`leaf_shape` finds them."""
     def to_fine(p: Array) -> Array:
@@ -820,7 +942,7 @@ def _landmarks(mask: NDArray[np.bool_], fine: NDArray[np.bool_], f: int, grey: N
     blade, blade_w = fine, mask
     petiole = np.zeros((0, 2))
     if pet is not None:
-        base, petiole, direction = _petiole_base(fine, pet, extent, base)
+        base, petiole, direction = _petiole_base(fine, pet, extent, base, colour)
         yx = np.argwhere(pet.pixels)
         behind = (yx[:, ::-1] - base) @ direction < 0
         cut = np.zeros_like(fine)
@@ -840,7 +962,7 @@ def _landmarks(mask: NDArray[np.bool_], fine: NDArray[np.bool_], f: int, grey: N
         if (abs(across) >= VEIN_SENSE and abs(across) > VEIN_TURN * abs(veins)
                 and elongation < VEIN_TURN_ELONGATION):
             axis, veins = np.array([-axis[1], axis[0]]), across     # the midrib runs across the principal axis
-        base, note = _base_without_petiole(contour, centre, axis, apex, float(f), veins)
+        base, note = _base_without_petiole(contour, centre, axis, apex, float(f), veins, elongation)
         if note:
             warnings.append(note)
     if apex is None:
@@ -863,13 +985,14 @@ def _off_axis(pet: _Petiole, found: tuple[NDArray[np.bool_], Array, Array, Array
 
 def leaf_shape(mask: NDArray[np.bool_], *, fine: NDArray[np.bool_] | None = None, f: int = 1,
                grey: NDArray[np.float32] | None = None, base: Array | None = None,
-               apex: Array | None = None) -> Shape:
+               apex: Array | None = None, colour: NDArray[np.floating] | None = None) -> Shape:
     """Blade, outline, base, apex and petiole of the leaf ``mask`` (module docstring).
 
     ``mask`` is the leaf at working resolution; ``fine`` the same leaf ``f`` times finer (pixel
     (i, j) of ``mask`` covers rows i·f .. i·f + f - 1 and columns j·f .. j·f + f - 1 of ``fine``),
     or None when they are one; ``grey`` the photo's brightness aligned with ``mask`` (for the
-    veins), if known. Blade-scale work (distance transform, opening, outline) is done on
+    veins), if known; ``colour`` the photo's RGB aligned with ``fine``, if known (a petiole hidden in
+    a narrow cordate sinus). Blade-scale work (distance transform, opening, outline) is done on
     ``mask``, the thin petiole on ``fine``; everything returned is in ``fine``'s pixels. ``base``
     and ``apex`` ((x, y) in ``fine``'s pixels), where given, are kept."""
     fine = mask if fine is None else fine
@@ -881,7 +1004,7 @@ def leaf_shape(mask: NDArray[np.bool_], *, fine: NDArray[np.bool_] | None = None
     core = _up(ndimage.binary_dilation(opened, _EIGHT) if f > 1 else opened, f, fine.shape)
     pet = _find_petiole(fine, core, extent)
     given = base
-    found = _landmarks(mask, fine, f, grey, pet, extent, given, apex)
+    found = _landmarks(mask, fine, f, grey, pet, extent, given, apex, colour)
     if pet is not None and given is None and _off_axis(pet, found):
         found = _landmarks(mask, fine, f, grey, None, extent, given, apex)    # a tooth or a second leaf, not a petiole
     blade, petiole, contour, base, apex, notes = found
