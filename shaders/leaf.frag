@@ -74,6 +74,22 @@ flat in uint v_leaf;
 out vec4 frag_color;
 #endif
 
+// The Frame block's output flags and eye, fixed when the program is compiled where the caller
+// knows them (render_many's thumbnails: LEAF_FRAME_SRGB, LEAF_FRAME_FLAT 0 or 1, LEAF_EYE_POINT 1 a
+// perspective eye, 0 an orthographic one), else read from the block. llvmpipe evaluates both arms
+// of a select on a uniform for every fragment: fixed, the unused arm is compiled out (3-6 % of a
+// thumbnail's rasterisation there; the same values, so the same pixels).
+#ifdef LEAF_FRAME_SRGB
+#define FRAME_SRGB (LEAF_FRAME_SRGB != 0)
+#else
+#define FRAME_SRGB (frame.flags.x != 0)
+#endif
+#ifdef LEAF_FRAME_FLAT
+#define FRAME_FLAT (LEAF_FRAME_FLAT != 0)
+#else
+#define FRAME_FLAT (frame.flags.y != 0)
+#endif
+
 // the unit normal of the side the camera sees (front faces show the upper side)
 vec3 visible_normal() {
     return normalize(v_normal) * (gl_FrontFacing ? 1.0 : -1.0);
@@ -290,7 +306,13 @@ void main() {
 #endif
 
     // towards the eye, not unit (llvmpipe evaluates both arms of a ?:)
+#ifndef LEAF_EYE_POINT
     vec3 view = frame.eye.w > 0.5 ? frame.eye.xyz - v_world : -frame.eye.xyz;
+#elif LEAF_EYE_POINT
+    vec3 view = frame.eye.xyz - v_world;
+#else
+    vec3 view = -frame.eye.xyz;
+#endif
 #ifdef LEAF_CANOPY
 #ifdef LEAF_STEMS
     sheen = 0.02;   // bark: a faint broad sheen
@@ -307,7 +329,7 @@ void main() {
     frag_color = vec4(canopy_output(color), 1.0);
 #else
     vec3 color = frame.ambient.rgb * albedo;
-    if (frame.flags.y != 0) {
+    if (FRAME_FLAT) {
         color = albedo;
     } else {
 #ifdef LEAF_NO_VEINS
@@ -317,7 +339,7 @@ void main() {
         color += key_fill(n, view, albedo, translucency, sheen, lobe);
 #endif
     }
-    frag_color = vec4(frame.flags.x != 0 ? linear_to_srgb(color) : color, 1.0);
+    frag_color = vec4(FRAME_SRGB ? linear_to_srgb(color) : color, 1.0);
 #endif
 }
 #endif

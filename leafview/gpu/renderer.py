@@ -68,15 +68,16 @@ from leafview.gpu.lobe_tables import LobeTables, lobed_grid
 from leafview.gpu.owner import GLObjects, GrowingBuffer
 from leafview.gpu.prepare import LeafPrepare
 from leafview.gpu.resources import WORLD_VARYINGS, GpuResources, JitterTable
-from leafview.gpu.targets import unpremultiply
+from leafview.gpu.targets import FlushTarget, unpremultiply
 from leafview.gpu.textures import LeafTextures, check_textures
 from leafview.gpu.vein_draw import VeinDraw
 from leafview.gpu.vein_tubes import VeinTubes
-from leafview.scene.camera import VIEWS, Camera, frame_views
+from leafview.scene.camera import VIEWS, Camera, frame_view_arrays
 
 __all__ = ["LeafRenderer", "DEFAULT_GRID", "BATCH", "Lighting", "fill_frame"]
 
 BATCH = 64            # leaves per atlas in render_many
+FLUSH_EVERY = 4       # leaves drawn before render_many hands them to the rasteriser (FlushTarget)
 _MAX_ATLAS = 4096     # atlas side limit in pixels (well inside GL_MAX_RENDERBUFFER_SIZE)
 
 # what a thumbnail captures of each vertex and then draws from: world position, world normal
@@ -145,6 +146,8 @@ class LeafRenderer:
             self.frame = self._objects.own(FrameUniforms(self.ctx))
             self._batch_leaf = self._objects.own(GrowingBuffer(self.ctx))
             self._batch_frame = self._objects.own(GrowingBuffer(self.ctx))
+            self._batch_frame_rest = self._objects.own(GrowingBuffer(self.ctx))   # frames after the first group
+            self._flush = self._objects.own(FlushTarget(self.ctx))
             self._batch_colour = self._objects.own(GrowingBuffer(self.ctx))
             self._batch_commands = self._objects.own(GrowingBuffer(self.ctx))
             self._baked_vao = self._objects.own(_BakedArray())
@@ -384,7 +387,9 @@ class LeafRenderer:
         """One vertex pass: every leaf's grid is evaluated once by ``leaf.vert`` and captured in
         world space (position, normal, drawn (u, v)), each camera is framed on exactly those
         vertices, and the tiles are drawn from the captured buffer itself with the baked-mesh
-        program (the same ``leaf.frag``), one indirect draw a leaf; one readback."""
+        program (the same ``leaf.frag``), one indirect draw a leaf; one
+        readback. The first :data:`FLUSH_EVERY` leaves go through these steps first and are
+        rasterised while the rest are captured, framed and drawn (:class:`FlushTarget`)."""
         n = len(leaves)
         files = self.textures.update(leaves)
         lobe_layers = self.batch_lobes.update(leaves)
@@ -400,53 +405,60 @@ class LeafRenderer:
         else:   # rows sit at the uniform-offset alignment: one small dispatch each
             for i in range(n):
                 self.prepare.run(leaf_rows, 1, offset=i * leaf_stride)
-        # the shader permutation without the features no leaf of this chunk uses
-        program, baked, colour_format = self._programs_for(records)
+        # the shader permutation without the features no leaf of this chunk uses, its output flags
+        # and the kind of eye fixed (leaf.frag: LEAF_FRAME_SRGB, LEAF_FRAME_FLAT, LEAF_EYE_POINT)
+        perspective = camera.perspective if camera is not None else view != "top"
+        program, baked, colour_format = self._programs_for(records, {
+            "LEAF_FRAME_SRGB": int(not linear), "LEAF_FRAME_FLAT": int(flat), "LEAF_EYE_POINT": int(perspective)})
         geometry = self.resources.grid(*grid)
         nverts = geometry.vertices
         points = geometry.points(program)
         self._bind_tables()
         self.batch_veins.use()
         self.batch_lobes.use()
-        self.frame.bind()   # the capture computes gl_Position too (discarded)
         leaf_bytes, frame_bytes = LEAF_BLOCK.nbytes, FRAME_BLOCK.nbytes
+        colours = self._batch_colour.write(_leaf_colours(records))
+        commands = self._batch_commands.write(_draw_commands(n, geometry.triangles * 3, nverts))
+        cols = min(n, max_cols)
+        tiles_y = (n + cols - 1) // cols
+        target = self.resources.target((cols * w, tiles_y * h), samples, linear=linear)
         with self.resources.capture.recording(n * nverts, DRAW_VERTEX_BYTES) as rec:
-            # 1. the only vertex-shader pass over the leaves: capture, frame each camera on it
-            for i in range(n):
-                leaf_rows.bind_to_uniform_block(LEAF_BINDING, offset=i * leaf_stride, size=leaf_bytes)
-                rec.add(points, nverts)
-            frames = np.zeros(n, dtype=FRAME_BLOCK.dtype)
-            if camera is not None:
-                fill_frame(frames[0], camera, srgb=not linear, flat=flat, size=(w, h))
-                frames[1:] = frames[0]
-            else:
-                world = rec.records()[:, :3].reshape(n, nverts, 3)
-                cams = frame_views(view, world, (w, h))
-                fill_frame(frames[0], cams[0], srgb=not linear, flat=flat, size=(w, h))
-                if n > 1:   # the lights and flags are every leaf's; the matrices and eye its own
-                    frames[1:] = frames[0]
-                    frames["view"][1:] = np.stack([c.view.T for c in cams[1:]])
-                    frames["proj"][1:] = np.stack([c.proj.T for c in cams[1:]])
-                    frames["eye"][1:] = np.stack([c.eye for c in cams[1:]])
-            frame_rows, frame_stride = self._write_records(self._batch_frame, frames)
-            colours = self._batch_colour.write(_leaf_colours(records))
-            commands = self._batch_commands.write(_draw_commands(n, geometry.triangles * 3, nverts))
-
-            # 2. draw each leaf into its tile from the captured vertices
-            cols = min(n, max_cols)
-            tiles_y = (n + cols - 1) // cols
-            target = self.resources.target((cols * w, tiles_y * h), samples, linear=linear)
-            target.use()
-            self.ctx.scissor = None
-            target.clear(bg)
-            self.ctx.enable_only(moderngl.DEPTH_TEST)
-            vao = self._baked_vao.get(self.ctx, baked, rec.buffer, colours, geometry.ibo, colour_format)
+            # In groups of FLUSH_EVERY leaves (the first group, then the rest at once):
+            # 1. the only vertex-shader pass over the group's leaves: capture (world space);
+            # 2. frame each camera on its leaf's captured vertices (one numpy pass for the group);
+            # 3. draw each leaf into its tile from the captured vertices, and hand every
+            #    FLUSH_EVERY leaves to the driver's rasteriser threads at once (llvmpipe:
+            #    FlushTarget), which shade them while this thread captures, frames and bins the
+            #    next ones. Each leaf's capture, camera and triangles (in order) are the same as
+            #    when the whole chunk went through each step at once: the same pixels.
+            vao = None
             try:
-                for i in range(n):
-                    x, y = (i % cols) * w, (i // cols) * h
-                    self.ctx.viewport = self.ctx.scissor = (x, y, w, h)
-                    frame_rows.bind_to_uniform_block(FRAME_BINDING, offset=i * frame_stride, size=frame_bytes)
-                    vao.render_indirect(commands, moderngl.TRIANGLES, count=1, first=i)
+                for first, last, buf in ((0, min(n, FLUSH_EVERY), self._batch_frame),
+                                         (min(n, FLUSH_EVERY), n, self._batch_frame_rest)):
+                    if first == last:
+                        continue
+                    self.frame.bind()   # the capture computes gl_Position too (discarded)
+                    for i in range(first, last):
+                        leaf_rows.bind_to_uniform_block(LEAF_BINDING, offset=i * leaf_stride, size=leaf_bytes)
+                        rec.add(points, nverts)
+                    world = (None if camera is not None
+                             else rec.records()[first * nverts:, :3].reshape(last - first, nverts, 3))
+                    frames = self._frames(world, camera, view, (w, h), linear, flat, last - first)
+                    frame_rows, frame_stride = self._write_records(buf, frames)
+                    if vao is None:   # the first group: the atlas is cleared, the state set once
+                        target.use()
+                        self.ctx.scissor = None
+                        target.clear(bg)
+                        self.ctx.enable_only(moderngl.DEPTH_TEST)
+                        vao = self._baked_vao.get(self.ctx, baked, rec.buffer, colours, geometry.ibo, colour_format)
+                    for i in range(first, last):
+                        x, y = (i % cols) * w, (i // cols) * h
+                        self.ctx.viewport = self.ctx.scissor = (x, y, w, h)
+                        frame_rows.bind_to_uniform_block(FRAME_BINDING, offset=(i - first) * frame_stride,
+                                                         size=frame_bytes)
+                        vao.render_indirect(commands, moderngl.TRIANGLES, count=1, first=i)
+                        if (i + 1) % FLUSH_EVERY == 0 and i + 1 < n:
+                            self._flush.flush(target.fbo)
             finally:
                 self.ctx.scissor = None
 
@@ -463,14 +475,41 @@ class LeafRenderer:
             images.append(np.ascontiguousarray(atlas[y:y + h, x:x + w]))
         return images
 
-    def _programs_for(self, records: NDArray[Any]) -> tuple[moderngl.Program, moderngl.Program,
-                                                               tuple[str, tuple[str, ...]]]:
+    def _frames(self, world: NDArray[np.float32] | None, camera: Camera | None, view: str,
+                size: tuple[int, int], linear: bool, flat: bool, count: int = 0) -> NDArray[Any]:
+        """FRAME_BLOCK records of leaves: each framed on its captured vertices ``world[i]`` (one
+        numpy pass for them all), or ``camera`` for ``count`` leaves when ``world`` is None."""
+        if world is None:
+            assert camera is not None
+            frames = np.zeros(count, dtype=FRAME_BLOCK.dtype)
+            fill_frame(frames[0], camera, srgb=not linear, flat=flat, size=size)
+            frames[1:] = frames[0]
+            return frames
+        frames = np.zeros(len(world), dtype=FRAME_BLOCK.dtype)
+        framed = frame_view_arrays(view, world, size)
+        if isinstance(framed, list):   # top: orthographic cameras
+            views, projs, eyes = (np.stack([getattr(c, a) for c in framed]) for a in ("view", "proj", "eye"))
+            one = framed[0]
+        else:
+            views, projs, eyes = framed
+            one = Camera(views[0], projs[0], eyes[0], True)
+        fill_frame(frames[0], one, srgb=not linear, flat=flat, size=size)
+        if len(frames) > 1:   # the lights and flags are every leaf's; the matrices and eye its own
+            frames[1:] = frames[0]
+            frames["view"][1:] = views[1:].transpose(0, 2, 1)
+            frames["proj"][1:] = projs[1:].transpose(0, 2, 1)
+            frames["eye"][1:] = eyes[1:]
+        return frames
+
+    def _programs_for(self, records: NDArray[Any], frame_defines: Mapping[str, int] | None = None
+                      ) -> tuple[moderngl.Program, moderngl.Program, tuple[str, tuple[str, ...]]]:
         """The capture program (the features the chunk's leaves use), the baked program that draws
-        from its records and the colour attributes' format of the latter: looked up once per set
-        of defines (the cache's programs live as long as the shared program cache)."""
+        from its records (with ``frame_defines``: leaf.frag's fixed Frame flags) and the colour
+        attributes' format of the latter: looked up once per set of defines (the cache's programs
+        live as long as the shared program cache)."""
         veins = vein_defines(records)
         capture_defines = {**feature_defines(records), **veins, **lobe_defines(records)}
-        baked_defines = {**texture_defines(records), **veins, "LEAF_BAKED_RIB": 1}
+        baked_defines = {**texture_defines(records), **veins, "LEAF_BAKED_RIB": 1, **(frame_defines or {})}
         key = (tuple(sorted(capture_defines.items())), tuple(sorted(baked_defines.items())))
         found = self._chunk_programs.get(key)
         if found is None:

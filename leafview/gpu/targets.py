@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from leafview.gpu.layout import AOV_OUTPUTS
 from leafview.gpu.limits import ContextLimits, check_image, check_memory, context_alive
 
-__all__ = ["RenderTarget", "OffscreenTarget", "AovTarget", "read_rgba", "unpremultiply"]
+__all__ = ["RenderTarget", "OffscreenTarget", "AovTarget", "FlushTarget", "read_rgba", "unpremultiply"]
 
 
 def read_rgba(fbo: moderngl.Framebuffer) -> NDArray[np.uint8]:
@@ -151,6 +151,34 @@ class RenderTarget(_Framebuffers):
 
 
 OffscreenTarget = RenderTarget   # the name the benchmarks and tests know
+
+
+class FlushTarget(_Framebuffers):
+    """A one-pixel framebuffer whose :meth:`flush` hands the draws made so far to the driver
+    without waiting for them (moderngl has no ``glFlush``). llvmpipe bins draws on the calling
+    thread and shades them on its rasteriser threads only when the batch ends: at a readback, a
+    finish, or when another framebuffer is drawn into. A clear of this pixel is such a change:
+    the draws so far are queued to the rasteriser threads at once, and the caller bins its next
+    draws meanwhile (``render_many``: about half the waiting for the last tile of a 16-leaf atlas
+    is gone). Nothing drawn changes: the atlas's pixels are shaded as before, in the same order.
+    On a hardware driver it is a one-pixel clear."""
+
+    def __init__(self, ctx: moderngl.Context) -> None:
+        self.ctx = ctx
+        self._objects: list[Any] = []
+        try:
+            colour = self._own(ctx.renderbuffer((1, 1), 4))
+            self.fbo: moderngl.Framebuffer = self._own(ctx.framebuffer([colour]))
+        except BaseException:
+            self.release()
+            raise
+
+    def flush(self, back: moderngl.Framebuffer) -> None:
+        """Queue the draws made so far, then bind ``back`` again (its viewport and scissor as
+        they were)."""
+        self.fbo.use()
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0)
+        back.use()
 
 
 class AovTarget(_Framebuffers):

@@ -42,7 +42,7 @@ from leafview.core.limits import MIN_FRAME_RATIO
 from leafview.core.params import LeafParams, ParamError
 from leafview.deform.surface import evaluate, grid_uv
 
-__all__ = ["VIEWS", "Camera", "frame_view", "frame_views", "check_framable", "check_leaf_framable", "MAX_FRAME_REACH",
+__all__ = ["VIEWS", "Camera", "frame_view", "frame_views", "frame_view_arrays", "look_at_arrays", "check_framable", "check_leaf_framable", "MAX_FRAME_REACH",
            "intrinsics", "camera_from_intrinsics", "CV_FROM_GL", "RING_FOV_DEG", "RING_ELEVATIONS", "ring_angles",
            "orbit_cameras"]
 
@@ -66,12 +66,57 @@ class Camera:
 def look_at(eye: ArrayLike, target: ArrayLike, aspect: float, near: float, far: float,
             fov_deg: float = FOV_DEG) -> Camera:
     """Perspective camera at ``eye`` looking at ``target`` with +z up; ``fov_deg`` is the vertical
-    field of view. Every perspective camera of leafview is made here."""
-    eye = np.asarray(eye, dtype=np.float64)
-    view = pyrr.matrix44.create_look_at(eye, np.asarray(target, dtype=np.float64), np.array([0.0, 0.0, 1.0]),
-                                        dtype=np.float64).T
-    proj = pyrr.matrix44.create_perspective_projection(fov_deg, aspect, near, far, dtype=np.float64).T
-    return Camera(view, proj, np.array([*eye, 1.0]), True)
+    field of view. Every perspective camera of leafview is made here or, several at once, by
+    :func:`look_at_arrays`."""
+    views, projs, eyes = look_at_arrays(np.asarray(eye, dtype=np.float64)[None], np.asarray(target, dtype=np.float64)[None],
+                                        aspect, np.array([near], np.float64), np.array([far], np.float64), fov_deg)
+    return Camera(views[0], projs[0], eyes[0], True)
+
+
+_NEXT, _LAST = [1, 2, 0], [2, 0, 1]   # cross product index cycles
+
+
+def look_at_arrays(eye: NDArray[np.float64], target: NDArray[np.float64], aspect: float,
+                   near: NDArray[np.float64], far: NDArray[np.float64], fov_deg: float = FOV_DEG
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """K perspective cameras at ``eye`` (K, 3) looking at ``target`` (K, 3) with +z up, clip planes
+    ``near``, ``far`` (K,): view and projection matrices (K, 4, 4) and eyes (K, 4), in one numpy
+    pass (a chunk of thumbnails is framed at once). The arithmetic of ``pyrr.matrix44``'s
+    ``create_look_at`` and ``create_perspective_projection``, operation for operation, except that
+    the view's translation sums its three products left to right (the same bits whatever K is;
+    ``np.dot`` may differ in the last bit of a float64, never of a float32)."""
+    k = len(eye)
+
+    def normalize(v: NDArray[np.float64]) -> NDArray[np.float64]:
+        return v / np.sqrt(np.sum(v ** 2, axis=-1))[:, None]
+
+    def cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+        # np.cross's products and differences, without its axis handling (a tenth of its time)
+        return a[:, _NEXT] * b[:, _LAST] - a[:, _LAST] * b[:, _NEXT]
+
+    forward = normalize(target - eye)
+    side = normalize(cross(forward, np.broadcast_to(np.array([0.0, 0.0, 1.0]), forward.shape)))
+    up = normalize(cross(side, forward))
+    views = np.zeros((k, 4, 4))
+    views[:, 0, :3], views[:, 1, :3], views[:, 2, :3] = side, up, -forward
+    for row, axis, sign in ((0, side, -1.0), (1, up, -1.0), (2, forward, 1.0)):
+        prod = axis * eye
+        views[:, row, 3] = sign * (prod[:, 0] + prod[:, 1] + prod[:, 2])
+    views[:, 3, 3] = 1.0
+    ymax = near * np.tan(fov_deg * np.pi / 360.0)
+    xmax = ymax * aspect
+    left, right, bottom, top = -xmax, xmax, -ymax, ymax
+    projs = np.zeros((k, 4, 4))
+    projs[:, 0, 0] = 2. * near / (right - left)
+    projs[:, 1, 1] = 2. * near / (top - bottom)
+    projs[:, 0, 2] = (right + left) / (right - left)
+    projs[:, 1, 2] = (top + bottom) / (top - bottom)
+    projs[:, 2, 2] = -(far + near) / (far - near)
+    projs[:, 2, 3] = -2. * far * near / (far - near)
+    projs[:, 3, 2] = -1.0
+    eyes = np.ones((k, 4))
+    eyes[:, :3] = eye
+    return views, projs, eyes
 
 
 def top_down(center: ArrayLike, z_top: float, half_w: float, half_h: float, depth: float) -> Camera:
@@ -180,18 +225,34 @@ def frame_views(view: str, points: NDArray[np.floating[Any]], size: tuple[int, i
     The orbit camera is as close as it can be with every point inside the central
     ``ORBIT_FILL`` of the image (tighter than a bounding sphere for long, narrow leaves), aimed at
     the middle of the projected extent."""
+    framed = frame_view_arrays(view, points, size)
+    if isinstance(framed, list):
+        return framed
+    views, projs, eyes = framed
+    return [Camera(views[k], projs[k], eyes[k], True) for k in range(len(views))]
+
+
+def frame_view_arrays(view: str, points: NDArray[np.floating[Any]], size: tuple[int, int]
+                      ) -> list[Camera] | tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`frame_views` without a :class:`Camera` per point set for the orbit views: their
+    view and projection matrices (K, 4, 4) and eyes (K, 4) as three arrays, made by one numpy pass
+    over the batch (:func:`look_at`'s arithmetic, operation for operation, for every camera at
+    once: a chunk of thumbnails is framed in one pass, not one ``look_at`` per leaf). The ``top``
+    view (orthographic) returns its list of cameras."""
     if view not in VIEWS:
         raise ValueError(f"unknown view {view!r} (choose from {', '.join(VIEWS)})")
-    pts = np.asarray(points, dtype=np.float64)
+    pts = np.asarray(points)
     if pts.ndim != 3 or pts.shape[2] != 3:
         raise ValueError(f"expected point sets of shape (K, N, 3), got {pts.shape}")
     if pts.size == 0:
         for p in pts:
             check_framable(p)   # raises: nothing to frame
         return []
-    # each coordinate's extremes from a (K, 3, N) copy: a reduction along contiguous rows, 15×
-    # faster than along the middle axis of (K, N, 3) and the same values (min and max are exact)
-    rows = np.ascontiguousarray(pts.transpose(0, 2, 1))
+    # each coordinate's extremes from a (K, 3, N) float64 copy (one pass from float32 records): a
+    # reduction along contiguous rows, 15× faster than along the middle axis of (K, N, 3) and the
+    # same values (min and max are exact)
+    rows = np.empty((pts.shape[0], 3, pts.shape[1]))
+    rows[...] = pts.transpose(0, 2, 1)
     lo, hi = rows.min(axis=2), rows.max(axis=2)
     finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
     reach = np.max(np.maximum(np.abs(lo), np.abs(hi)), axis=1)
@@ -205,8 +266,10 @@ def frame_views(view: str, points: NDArray[np.floating[Any]], size: tuple[int, i
     az_deg, el_deg = _ORBITS[view]
     basis, tan_x, tan_y = _orbit_axes(az_deg, el_deg, w, h)
     center = (lo + hi) / 2
-    cam = (pts - center[:, None]) @ basis.T
-    x, y, z = cam[..., 0], cam[..., 1], cam[..., 2]
+    # camera coordinates of every point, one (K, N) row array per axis (contiguous: the
+    # reductions below run along rows); the same sums as (pts - center) @ basis.T, term by term
+    rel = rows - center[:, :, None]
+    x, y, z = (rel[:, 0] * b[0] + rel[:, 1] * b[1] + rel[:, 2] * b[2] for b in basis)
     shift_x, shift_y = np.zeros(len(pts)), np.zeros(len(pts))
     for _ in range(3):  # distance for the current aim, then re-aim at the projected middle
         xs, ys = x - shift_x[:, None], y - shift_y[:, None]
@@ -219,7 +282,19 @@ def frame_views(view: str, points: NDArray[np.floating[Any]], size: tuple[int, i
     dist = np.maximum(np.max(z + np.maximum(np.abs(xs) / tan_x, np.abs(ys) / tan_y), axis=1), 1e-6)
     center = center + basis[0] * shift_x[:, None] + basis[1] * shift_y[:, None]
     zmax = np.abs(z).max(axis=1)
-    return [_orbit_camera(center[k], basis[2], float(dist[k]), float(zmax[k]), w, h) for k in range(len(pts))]
+    return _orbit_cameras(center, basis[2], dist, zmax, w, h)
+
+
+def _orbit_cameras(center: NDArray[np.float64], back: NDArray[np.float64], dist: NDArray[np.float64],
+                   zmax: NDArray[np.float64], w: int, h: int
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The orbit cameras aimed at ``center`` (K, 3) from ``dist`` (K,) along ``back``, their clip
+    planes around the depth ``zmax`` (K,) of the points along the view axis (the aim moved across
+    it only), as :func:`look_at_arrays` returns them."""
+    eye = center + dist[:, None] * back
+    near = np.maximum(dist - zmax * 1.5 - 1e-3, dist * 1e-3)
+    far = dist + zmax * 1.5 + 1e-3
+    return look_at_arrays(eye, center, w / h, near, far)
 
 
 def check_framable(points: ArrayLike, what: str = "the geometry", path: str = "transform") -> None:
@@ -281,15 +356,6 @@ def _orbit_axes(az_deg: float, el_deg: float, w: int, h: int) -> tuple[NDArray[n
     basis = np.stack([right, up, back])
     basis.setflags(write=False)
     return basis, tan_y * w / h, tan_y
-
-
-def _orbit_camera(center: NDArray[np.float64], back: NDArray[np.float64], dist: float, zmax: float,
-                  w: int, h: int) -> Camera:
-    """The orbit camera aimed at ``center`` from ``dist`` along ``back``, its clip planes around
-    the depth ``zmax`` of the points along the view axis (the aim moved across it only)."""
-    eye = center + dist * back
-    near, far = max(dist - zmax * 1.5 - 1e-3, dist * 1e-3), dist + zmax * 1.5 + 1e-3
-    return look_at(eye, center, w / h, near, far)
 
 
 SCENE_VIEWS = ("three-quarter", "top", "front", "side", "ground")

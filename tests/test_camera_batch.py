@@ -1,0 +1,80 @@
+"""The thumbnails' framing of a whole chunk in one numpy pass (frame_view_arrays) against the
+framing of one point set at a time with look_at, the per-camera function it replaces."""
+
+import numpy as np
+import pytest
+
+from leafview.scene.camera import (
+    _ORBITS,
+    FOV_DEG,
+    VIEWS,
+    Camera,
+    _orbit_axes,
+    frame_view,
+    frame_view_arrays,
+    look_at,
+)
+
+
+def _one_at_a_time(view: str, pts: np.ndarray, size: tuple[int, int]) -> Camera:
+    """The orbit framing of one point set as leafview computed it before the batch pass: the
+    (N, 3) @ basis.T projection, three re-aims, then look_at for the single camera."""
+    w, h = size
+    basis, tan_x, tan_y = _orbit_axes(*_ORBITS[view], w, h)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    center = (lo + hi) / 2
+    cam = (pts - center) @ basis.T
+    x, y, z = cam[:, 0], cam[:, 1], cam[:, 2]
+    sx_, sy_ = 0.0, 0.0
+    for _ in range(3):
+        xs, ys = x - sx_, y - sy_
+        dist = max(float(np.max(z + np.maximum(np.abs(xs) / tan_x, np.abs(ys) / tan_y))), 1e-6)
+        depth = dist - z
+        sx, sy = xs / depth, ys / depth
+        sx_ += dist * (sx.max() + sx.min()) / 2
+        sy_ += dist * (sy.max() + sy.min()) / 2
+    xs, ys = x - sx_, y - sy_
+    dist = max(float(np.max(z + np.maximum(np.abs(xs) / tan_x, np.abs(ys) / tan_y))), 1e-6)
+    center = center + basis[0] * sx_ + basis[1] * sy_
+    zmax = float(np.abs(z).max())
+    eye = center + dist * basis[2]
+    near, far = max(dist - zmax * 1.5 - 1e-3, dist * 1e-3), dist + zmax * 1.5 + 1e-3
+    return look_at(eye, center, w / h, near, far, fov_deg=FOV_DEG)
+
+
+@pytest.mark.parametrize("view", [v for v in VIEWS if v != "top"])
+def test_batch_cameras_are_look_at_cameras(view):
+    """Each camera of the batch pass equals the one-at-a-time framing to float64 rounding, and
+    what the GPU gets (float32 matrices and eye) is the same to a float32 step."""
+    rng = np.random.default_rng(7)
+    pts = (rng.normal(size=(11, 500, 3)) * rng.uniform(0.01, 2.0, size=(11, 1, 3))
+           + rng.normal(size=(11, 1, 3))).astype(np.float32)   # float32, as the capture records them
+    size = (96, 64)
+    views, projs, eyes = frame_view_arrays(view, pts, size)
+    assert views.shape == projs.shape == (11, 4, 4) and eyes.shape == (11, 4)
+    for k in range(len(pts)):
+        ref = _one_at_a_time(view, pts[k].astype(np.float64), size)
+        for got, want in ((views[k], ref.view), (projs[k], ref.proj), (eyes[k], ref.eye)):
+            np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
+            np.testing.assert_allclose(got.astype(np.float32), want.astype(np.float32), rtol=1.2e-7, atol=0)
+        one = frame_view(view, pts[k], size)   # frame_view is the batch pass for one set
+        np.testing.assert_array_equal(one.view, views[k])
+        np.testing.assert_array_equal(one.proj, projs[k])
+
+
+def test_batch_cameras_see_every_point():
+    """Every point lands inside the image (clip space within ±1 and between the clip planes)."""
+    rng = np.random.default_rng(3)
+    pts = rng.normal(size=(5, 400, 3)) * [1.0, 0.3, 0.05]
+    views, projs, _ = frame_view_arrays("three-quarter", pts, (128, 128))
+    for k in range(5):
+        clip = np.c_[pts[k], np.ones(len(pts[k]))] @ (projs[k] @ views[k]).T
+        ndc = clip[:, :3] / clip[:, 3:]
+        assert np.abs(ndc).max() <= 1.0
+
+
+def test_top_view_gives_cameras():
+    """The orthographic view keeps its list of cameras (the renderer stacks them)."""
+    pts = np.random.default_rng(1).normal(size=(3, 50, 3))
+    cams = frame_view_arrays("top", pts, (64, 64))
+    assert isinstance(cams, list) and len(cams) == 3 and not cams[0].perspective
