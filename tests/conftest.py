@@ -37,6 +37,21 @@ def run_prepare(gl, records: np.ndarray) -> np.ndarray:
         buf.release()
 
 
+def draw_each(target, batches, camera, after=None) -> list[np.ndarray]:
+    """Each of ``batches`` (InstancedLeaves, BakedLeaves, ...) drawn alone into ``target`` through
+    ``camera`` and read back; ``after(batch)`` runs after each draw (an error check)."""
+    images = []
+    for batch in batches:
+        target.use()
+        target.clear()
+        batch.set_camera(camera)
+        batch.draw()
+        if after is not None:
+            after(batch)
+        images.append(target.read())
+    return images
+
+
 def compare(actual: np.ndarray, reference: np.ndarray) -> tuple[float, int]:
     """(fraction of pixels off by more than PIXEL_TOL, largest difference)."""
     diff = np.abs(actual.astype(np.int16) - reference.astype(np.int16)).max(axis=-1)

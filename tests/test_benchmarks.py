@@ -12,6 +12,7 @@ import pytest
 from leafview.deform.surface import jitter_table, tessellate
 from leafview.gpu.layout import LEAF_BLOCK, pack_leaf
 from leafview.scene.camera import frame_view
+from tests.conftest import draw_each
 
 NUMERIC_KEYS = (
     "thumbnails_per_s", "matplotlib_thumbnails_per_s", "thumbnail_speedup",
@@ -86,14 +87,7 @@ def test_instanced_and_baked_draw_the_same_picture(gl):
     with OffscreenTarget(ctx, (256, 256)) as target, \
             InstancedLeaves(ctx, recs, (9, 15), jitter_tables=table) as inst, \
             BakedLeaves.from_params(ctx, params, (9, 15)) as baked:
-        images = []
-        for batch in (inst, baked):
-            target.use()
-            target.clear()
-            batch.set_camera(camera)
-            batch.draw()
-            _no_error(ctx, f"{type(batch).__name__}.draw")
-            images.append(target.read())
+        images = draw_each(target, (inst, baked), camera, lambda batch: _no_error(ctx, f"{type(batch).__name__}.draw"))
     a, b = images
     cover_a, cover_b = (a[..., 3] > 0).mean(), (b[..., 3] > 0).mean()
     assert cover_a > 0.03, "the leaves should fill a good part of the image"

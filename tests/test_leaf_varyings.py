@@ -11,6 +11,7 @@ import pytest
 
 from leafview.gpu.instanced import BakedLeaves, InstancedLeaves, OffscreenTarget, pack_leaves, scatter_leaves
 from leafview.scene.camera import frame_view
+from tests.conftest import draw_each
 
 SIZE = (256, 256)
 
@@ -39,13 +40,7 @@ def test_packed_colours_draw_as_the_float_colours(gl):
             BakedLeaves.from_instanced(inst, resources=gl.resources) as baked:
         pos, _ = inst.capture()
         camera = frame_view("three-quarter", pos.reshape(-1, 3).astype(np.float64), SIZE)
-        images = []
-        for batch in (inst, baked):
-            target.use()
-            target.clear()
-            batch.set_camera(camera)
-            batch.draw()
-            images.append(target.read())
+        images = draw_each(target, (inst, baked), camera)
     assert ctx.error == "GL_NO_ERROR"
     a, b = (img.astype(np.int16) for img in images)
     covered = a[..., 3] > 0
