@@ -12,6 +12,7 @@ from leafview.scene.camera import (
     _orbit_axes,
     frame_view,
     frame_view_arrays,
+    frame_views,
     look_at,
 )
 
@@ -73,8 +74,17 @@ def test_batch_cameras_see_every_point():
         assert np.abs(ndc).max() <= 1.0
 
 
-def test_top_view_gives_cameras():
-    """The orthographic view keeps its list of cameras (the renderer stacks them)."""
+def test_top_view_arrays_are_its_cameras():
+    """The orthographic view's arrays are those of its cameras, one per set, and frame_views
+    makes orthographic cameras of them."""
     pts = np.random.default_rng(1).normal(size=(3, 50, 3))
-    cams = frame_view_arrays("top", pts, (64, 64))
-    assert isinstance(cams, list) and len(cams) == 3 and not cams[0].perspective
+    views, projs, eyes = frame_view_arrays("top", pts, (64, 64))
+    cams = frame_views("top", pts, (64, 64))
+    assert views.shape == projs.shape == (3, 4, 4) and eyes.shape == (3, 4)
+    for k, cam in enumerate(cams):
+        assert not cam.perspective
+        assert np.array_equal(cam.view, views[k]) and np.array_equal(cam.proj, projs[k])
+        np.testing.assert_array_equal(cam.eye, [0.0, 0.0, -1.0, 0.0])
+        ref = frame_view("top", pts[k], (64, 64))
+        np.testing.assert_array_equal(ref.proj, projs[k])
+    assert frame_view_arrays("top", pts[:0], (64, 64))[0].shape == (0, 4, 4)

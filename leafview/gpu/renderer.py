@@ -479,23 +479,15 @@ class LeafRenderer:
                 size: tuple[int, int], linear: bool, flat: bool, count: int = 0) -> NDArray[Any]:
         """FRAME_BLOCK records of leaves: each framed on its captured vertices ``world[i]`` (one
         numpy pass for them all), or ``camera`` for ``count`` leaves when ``world`` is None."""
-        if world is None:
-            assert camera is not None
-            frames = np.zeros(count, dtype=FRAME_BLOCK.dtype)
-            fill_frame(frames[0], camera, srgb=not linear, flat=flat, size=size)
-            frames[1:] = frames[0]
-            return frames
-        frames = np.zeros(len(world), dtype=FRAME_BLOCK.dtype)
-        framed = frame_view_arrays(view, world, size)
-        if isinstance(framed, list):   # top: orthographic cameras
-            views, projs, eyes = (np.stack([getattr(c, a) for c in framed]) for a in ("view", "proj", "eye"))
-            one = framed[0]
-        else:
+        framed = None if world is None else frame_view_arrays(view, world, size)
+        if framed is not None:
             views, projs, eyes = framed
-            one = Camera(views[0], projs[0], eyes[0], True)
-        fill_frame(frames[0], one, srgb=not linear, flat=flat, size=size)
-        if len(frames) > 1:   # the lights and flags are every leaf's; the matrices and eye its own
-            frames[1:] = frames[0]
+            count, camera = len(views), Camera(views[0], projs[0], eyes[0], view != "top")
+        assert camera is not None
+        frames = np.zeros(count, dtype=FRAME_BLOCK.dtype)
+        fill_frame(frames[0], camera, srgb=not linear, flat=flat, size=size)
+        frames[1:] = frames[0]   # the lights and flags are every leaf's
+        if framed is not None and count > 1:   # the matrices and eye each leaf's own
             frames["view"][1:] = views[1:].transpose(0, 2, 1)
             frames["proj"][1:] = projs[1:].transpose(0, 2, 1)
             frames["eye"][1:] = eyes[1:]

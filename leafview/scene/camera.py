@@ -225,20 +225,16 @@ def frame_views(view: str, points: NDArray[np.floating[Any]], size: tuple[int, i
     The orbit camera is as close as it can be with every point inside the central
     ``ORBIT_FILL`` of the image (tighter than a bounding sphere for long, narrow leaves), aimed at
     the middle of the projected extent."""
-    framed = frame_view_arrays(view, points, size)
-    if isinstance(framed, list):
-        return framed
-    views, projs, eyes = framed
-    return [Camera(views[k], projs[k], eyes[k], True) for k in range(len(views))]
+    views, projs, eyes = frame_view_arrays(view, points, size)
+    return [Camera(views[k], projs[k], eyes[k], view != "top") for k in range(len(views))]
 
 
 def frame_view_arrays(view: str, points: NDArray[np.floating[Any]], size: tuple[int, int]
-                      ) -> list[Camera] | tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """:func:`frame_views` without a :class:`Camera` per point set for the orbit views: their
-    view and projection matrices (K, 4, 4) and eyes (K, 4) as three arrays, made by one numpy pass
-    over the batch (:func:`look_at`'s arithmetic, operation for operation, for every camera at
-    once: a chunk of thumbnails is framed in one pass, not one ``look_at`` per leaf). The ``top``
-    view (orthographic) returns its list of cameras."""
+                      ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`frame_views` without a :class:`Camera` per point set: the view and projection
+    matrices (K, 4, 4) and eyes (K, 4) as three arrays (perspective unless ``view`` is ``top``),
+    the orbit views made by one numpy pass over the batch (:func:`look_at_arrays`: a chunk of
+    thumbnails is framed at once, not one ``look_at`` per leaf)."""
     if view not in VIEWS:
         raise ValueError(f"unknown view {view!r} (choose from {', '.join(VIEWS)})")
     pts = np.asarray(points)
@@ -247,7 +243,7 @@ def frame_view_arrays(view: str, points: NDArray[np.floating[Any]], size: tuple[
     if pts.size == 0:
         for p in pts:
             check_framable(p)   # raises: nothing to frame
-        return []
+        return np.zeros((0, 4, 4)), np.zeros((0, 4, 4)), np.zeros((0, 4))
     # each coordinate's extremes from a (K, 3, N) float64 copy (one pass from float32 records): a
     # reduction along contiguous rows, 15× faster than along the middle axis of (K, N, 3) and the
     # same values (min and max are exact)
@@ -262,7 +258,9 @@ def frame_view_arrays(view: str, points: NDArray[np.floating[Any]], size: tuple[
         check_framable(pts[int(np.argmax(bad))])   # raises the same error as frame_view
     w, h = size
     if view == "top":
-        return [_top(lo[k], hi[k], w, h) for k in range(len(pts))]
+        tops = [_top(lo[k], hi[k], w, h) for k in range(len(pts))]
+        return (np.stack([c.view for c in tops]), np.stack([c.proj for c in tops]),
+                np.stack([c.eye for c in tops]))
     az_deg, el_deg = _ORBITS[view]
     basis, tan_x, tan_y = _orbit_axes(az_deg, el_deg, w, h)
     center = (lo + hi) / 2
