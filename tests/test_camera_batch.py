@@ -1,7 +1,9 @@
 """The thumbnails' framing of a whole chunk in one numpy pass (frame_view_arrays) against the
-framing of one point set at a time with look_at, the per-camera function it replaces."""
+framing of one point set at a time, and look_at_arrays (every perspective camera, look_at
+included) against pyrr's look-at and perspective matrices, the arithmetic it restates."""
 
 import numpy as np
+import pyrr
 import pytest
 
 from leafview.scene.camera import (
@@ -14,12 +16,22 @@ from leafview.scene.camera import (
     frame_view_arrays,
     frame_views,
     look_at,
+    look_at_arrays,
 )
+
+
+def _pyrr_camera(eye, target, aspect, near, far, fov_deg=FOV_DEG) -> Camera:
+    """The perspective camera as pyrr makes it (float64), the reference for look_at_arrays."""
+    eye = np.asarray(eye, np.float64)
+    view = pyrr.matrix44.create_look_at(eye, np.asarray(target, np.float64), np.array([0.0, 0.0, 1.0]),
+                                        dtype=np.float64).T
+    proj = pyrr.matrix44.create_perspective_projection(fov_deg, aspect, near, far, dtype=np.float64).T
+    return Camera(view, proj, np.array([*eye, 1.0]), True)
 
 
 def _one_at_a_time(view: str, pts: np.ndarray, size: tuple[int, int]) -> Camera:
     """The orbit framing of one point set as leafview computed it before the batch pass: the
-    (N, 3) @ basis.T projection, three re-aims, then look_at for the single camera."""
+    (N, 3) @ basis.T projection, three re-aims, then pyrr's matrices for the single camera."""
     w, h = size
     basis, tan_x, tan_y = _orbit_axes(*_ORBITS[view], w, h)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
@@ -40,7 +52,26 @@ def _one_at_a_time(view: str, pts: np.ndarray, size: tuple[int, int]) -> Camera:
     zmax = float(np.abs(z).max())
     eye = center + dist * basis[2]
     near, far = max(dist - zmax * 1.5 - 1e-3, dist * 1e-3), dist + zmax * 1.5 + 1e-3
-    return look_at(eye, center, w / h, near, far, fov_deg=FOV_DEG)
+    return _pyrr_camera(eye, center, w / h, near, far)
+
+
+def test_look_at_is_pyrrs_camera():
+    """look_at and look_at_arrays give pyrr's matrices to float64 rounding (the view's translation
+    summed left to right, not by np.dot), the same float32 values, for cameras near and far."""
+    rng = np.random.default_rng(5)
+    eyes = rng.normal(size=(300, 3)) * rng.uniform(0.05, 80.0, size=(300, 1))
+    targets = rng.normal(size=(300, 3))
+    near, far = rng.uniform(1e-3, 0.5, 300), rng.uniform(5.0, 500.0, 300)
+    for fov in (FOV_DEG, 50.0):
+        views, projs, eyes4 = look_at_arrays(eyes, targets, 1.5, near, far, fov)
+        for k in range(len(eyes)):
+            ref = _pyrr_camera(eyes[k], targets[k], 1.5, near[k], far[k], fov)
+            one = look_at(eyes[k], targets[k], 1.5, near[k], far[k], fov)
+            for got, want in ((views[k], ref.view), (projs[k], ref.proj), (one.view, ref.view), (one.proj, ref.proj)):
+                np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
+            np.testing.assert_array_equal(one.view, views[k])   # one camera or many: the same bits
+            np.testing.assert_array_equal(eyes4[k], ref.eye)
+            assert one.perspective
 
 
 @pytest.mark.parametrize("view", [v for v in VIEWS if v != "top"])

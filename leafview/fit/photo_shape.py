@@ -651,19 +651,30 @@ def _width_at(s: Array, lat: Array, at: float, step: float) -> float:
     return float(lat[band].max() - lat[band].min()) if band.sum() >= 2 else 0.0
 
 
+def _sign_changes(lat: Array) -> NDArray[np.intp]:
+    """Indices of the closed contour's edges (point i to i + 1) whose ends lie on either side of
+    the line ``lat`` = 0."""
+    return np.nonzero(np.sign(lat) != np.sign(np.roll(lat, -1)))[0]
+
+
+def _crossing_points(contour: Array, s: Array, lat: Array, cross: NDArray[np.intp]) -> tuple[Array, Array]:
+    """Where the contour's edges ``cross`` meet the line ``lat`` = 0: their positions along it
+    (``s``, linearly interpolated) and the points themselves."""
+    nxt = (cross + 1) % len(contour)
+    w = lat[cross] / np.where(lat[cross] == lat[nxt], 1.0, lat[cross] - lat[nxt])
+    return s[cross] + w * (s[nxt] - s[cross]), contour[cross] + w[:, None] * (contour[nxt] - contour[cross])
+
+
 def _end_point(contour: Array, s: Array, lat: Array, low: bool, hull: Array) -> tuple[Array, float]:
     """One end of the blade along its axis: the point where the axis line crosses the contour
     there, and how deep that point lies inside the contour's convex hull (``hull``: its facet
     equations). A deep one is a notch, and the point becomes the deepest contour point near it (a
     cordate base's sinus)."""
-    nxt = np.roll(np.arange(len(contour)), -1)
-    cross = np.nonzero(np.sign(lat) != np.sign(lat[nxt]))[0]
+    cross = _sign_changes(lat)
     if len(cross) == 0:
         cross = np.array([int(np.argmin(np.abs(lat)))])
-    w = lat[cross] / np.where(lat[cross] == lat[nxt[cross]], 1.0, lat[cross] - lat[nxt[cross]])
-    sc = s[cross] + w * (s[nxt[cross]] - s[cross])
-    j = int(np.argmin(sc)) if low else int(np.argmax(sc))
-    point = contour[cross[j]] + w[j] * (contour[nxt[cross[j]]] - contour[cross[j]])
+    sc, points = _crossing_points(contour, s, lat, cross)
+    point = points[int(np.argmin(sc)) if low else int(np.argmax(sc))]
     depth = float(-np.max(hull[:, :2] @ point + hull[:, 2]))
     extent = float(s.max() - s.min())
     if depth > NOTCH_DEPTH * extent:
@@ -787,13 +798,12 @@ def _base_without_petiole(contour: Array, centre: Array, axis: Array, apex: Arra
 def _ray_exit(contour: Array, origin: Array, ray: Array) -> Array:
     """The farthest point where the line from ``origin`` along the unit ``ray`` crosses the contour."""
     s, lat = _frame(contour, origin, ray)
-    nxt = np.roll(np.arange(len(contour)), -1)
-    cross = np.nonzero((np.sign(lat) != np.sign(lat[nxt])) & (s > 0))[0]
+    cross = _sign_changes(lat)
+    cross = cross[s[cross] > 0]
     if len(cross) == 0:
         return contour[int(np.argmax(np.where(s > 0, s - np.abs(lat), -np.inf)))].copy()
-    w = lat[cross] / np.where(lat[cross] == lat[nxt[cross]], 1.0, lat[cross] - lat[nxt[cross]])
-    j = int(np.argmax(s[cross] + w * (s[nxt[cross]] - s[cross])))
-    return np.asarray(contour[cross[j]] + w[j] * (contour[nxt[cross[j]]] - contour[cross[j]]), np.float64)
+    sc, points = _crossing_points(contour, s, lat, cross)
+    return np.asarray(points[int(np.argmax(sc))], np.float64)
 
 
 def _stub_root(contour: Array, apex: Array, end: Array, widest: float, f: float) -> Array | None:
