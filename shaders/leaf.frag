@@ -36,14 +36,8 @@ in vec3 v_world;
 in vec3 v_normal;
 in vec2 v_uv;
 in vec2 v_rib;   // distance from the midrib (or a lobed leaf's skeleton) in half-widths, fade (leaf.vert)
-#if defined(LEAF_INSTANCED) || defined(LEAF_INDIRECT)
-flat in uvec4 v_colours;    // front rgb, translucency, back rgb as halves (leaf.vert): one slot, not two
-#define v_front vec4(unpackHalf2x16(v_colours.x), unpackHalf2x16(v_colours.y))
-#define v_back vec3(unpackHalf2x16(v_colours.z), unpackHalf2x16(v_colours.w).x)
-#else
-flat in vec4 v_front;
-flat in vec3 v_back;
-#endif
+// v_front, v_back: one flat slot of halves (leaf_colours.glsl)
+#include "leaf_colours.glsl"
 flat in ivec2 v_layers;
 #ifndef LEAF_NO_TEXTURE
 #include "leaf_texture.glsl"

@@ -50,16 +50,8 @@ out vec3 v_world;
 out vec3 v_normal;
 out vec2 v_uv;
 out vec2 v_rib;             // the lighter vein band of leaf.frag: (distance from it in half-widths, fade)
-#if defined(LEAF_INSTANCED) || defined(LEAF_INDIRECT)
-// the colours as halves in one flat slot (front rgb, translucency, back rgb), not two: llvmpipe
-// stores and emits every output slot of every vertex (15 M for a 10^5-leaf scene, most of whose
-// triangles cover no pixel), a slot about 9 % of such a frame; leaf.frag unpacks them (an error
-// of at most 2^-11 of a colour, under 0.02 of an 8-bit step)
-flat out uvec4 v_colours;
-#else
-flat out vec4 v_front;      // rgb, translucency
-flat out vec3 v_back;
-#endif
+#define LEAF_COLOURS_OUT
+#include "leaf_colours.glsl"
 flat out ivec2 v_layers;    // front, back image texture layer, -1 untextured (leaf.frag)
 #ifndef LEAF_NO_VEINS
 flat out vec4 v_vein;       // vein layer (-1: no veins), world scale, detail, contrast (leaf_vein_lod.glsl)
@@ -138,13 +130,7 @@ void main() {
     v_world = world.xyz;
     v_normal = normalize(mat3(LEAF.model) * n);  // rotation and uniform scale only
     v_uv = uv;
-#if defined(LEAF_INSTANCED) || defined(LEAF_INDIRECT)
-    v_colours = uvec4(packHalf2x16(LEAF.front.rg), packHalf2x16(LEAF.front.ba),
-                      packHalf2x16(LEAF.back.rg), packHalf2x16(vec2(LEAF.back.b, 0.0)));
-#else
-    v_front = LEAF.front;
-    v_back = LEAF.back.rgb;
-#endif
+    v_colours = pack_colours(LEAF.front, LEAF.back.rgb);
     v_layers = ivec2(leaf_front_layer(LEAF), leaf_back_layer(LEAF));
 #ifdef LEAF_AOV
     v_leaf = LEAF_INDEX;

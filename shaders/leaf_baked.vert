@@ -27,8 +27,8 @@ out vec2 v_uv;
 in vec2 in_rib;   // the vein band's coordinates as leaf.vert computed them (thumbnails)
 #endif
 out vec2 v_rib;   // leaf.frag's vein band: in_rib, else (|u|, v) of the grid the leaf was baked on
-flat out vec4 v_front;
-flat out vec3 v_back;
+#define LEAF_COLOURS_OUT
+#include "leaf_colours.glsl"
 flat out ivec2 v_layers;
 #ifndef LEAF_NO_VEINS
 flat out vec4 v_vein;
@@ -44,8 +44,7 @@ void main() {
 #else
     v_rib = vec2(abs(in_uv.x), in_uv.y);
 #endif
-    v_front = in_front;
-    v_back = in_back.rgb;
+    v_colours = pack_colours(in_front, in_back.rgb);
 #ifdef LEAF_NO_TEXTURE
     v_layers = ivec2(-1);
 #else

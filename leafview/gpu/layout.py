@@ -55,7 +55,7 @@ __all__ = ["Block", "LEAF_BLOCK", "FRAME_BLOCK", "LIGHT_BLOCK", "SHADOW_BLOCK", 
            "VEIN_GRID_UNIT", "VEIN_STYLE_UNIT", "VEIN_SEGMENTS_BINDING", "VEIN_TEXELS_BINDING",
            "VEIN_TILES_BINDING", "VEIN_FIELD_SAMPLER", "VEIN_GRID_SAMPLER", "LOBE_UNIT", "LOBE_SAMPLER",
            "Slot", "LEAF_SLOTS", "BRANCH_RIPPLE", "BRANCH_BEND", "BRANCH_ROWS", "BRANCH_LOBE", "branch_code", "branch_parts", "without_derived", "PAIR_MEMBERS", "read_slot", "write_slot", "read_pair", "accessors_glsl",
-           "struct_from_dtype", "pack_leaf", "pack_leaves", "ripple_keys", "feature_defines", "generated_sources",
+           "struct_from_dtype", "pack_leaf", "pack_leaves", "pack_colours", "ripple_keys", "feature_defines", "generated_sources",
            "texture_keys", "texture_layers", "write_texture_layers", "texture_defines", "PLAIN_DEFINES", "shadow_defines",
            "write_vein_layers", "vein_defines", "NO_VEIN_DEFINES", "VEIN_SKIN_DEFINES",
            "write_lobe_layers", "lobe_defines", "NO_LOBE_DEFINES", "LOBE_TABLE_ROWS",
@@ -900,6 +900,18 @@ def attribute_format(block: Block, present: Container[str] | None = None) -> tup
     if block.nbytes > at:
         parts.append(f"{block.nbytes - at}x")
     return " ".join(parts) + "/i", tuple(names)
+
+
+def pack_colours(front: ArrayLike, back: ArrayLike) -> NDArray[np.uint32]:
+    """The numpy twin of ``pack_colours`` in ``shaders/leaf_colours.glsl``: a leaf's front rgb and
+    translucency (N, 4) and back rgb (N, 3) as the (N, 4) uint32 of ``v_colours``, two IEEE halves
+    each (round to nearest even), the first in the low 16 bits as ``packHalf2x16`` puts it."""
+    f = np.asarray(front, np.float32).reshape(-1, 4)
+    b = np.asarray(back, np.float32).reshape(-1, 3)
+    values = np.concatenate([f, b, np.zeros((f.shape[0], 1), np.float32)], axis=1)
+    halves = values.astype(np.float16).view(np.uint16).astype(np.uint32)
+    out: NDArray[np.uint32] = halves[:, 0::2] | (halves[:, 1::2] << np.uint32(16))
+    return out
 
 
 def vertex_records(rows: np.ndarray, picks: ArrayLike) -> NDArray[Any]:
