@@ -10,14 +10,13 @@ baked 32×64 mesh against the record.
 
 from __future__ import annotations
 
-import statistics
 from collections.abc import Callable
 from typing import Any
 
 import moderngl
 import numpy as np
 
-from leafview.bench.timing import Progress, median_time
+from leafview.bench.timing import Progress, interleaved
 from leafview.gpu.context import check_error
 from leafview.gpu.instanced import BakedLeaves, InstancedLeaves, OffscreenTarget, pack_leaves, read_rgba, scatter_leaves
 from leafview.gpu.layout import LEAF_BLOCK
@@ -77,15 +76,11 @@ def instanced_vs_baked(ctx: moderngl.Context, n_leaves: int, repeats: int, progr
                     return go
 
                 progress.step("instanced vs baked leaves")
-                t_inst, t_baked = [], []
-                for _ in range(repeats):  # interleaved, so drift hits both alike
-                    t_inst.append(median_time(frame(inst), 1, ctx.finish))
-                    t_baked.append(median_time(frame(baked), 1, ctx.finish))
+                timed = interleaved(frame(inst), frame(baked), repeats, ctx.finish)   # ratio: baked ÷ instanced
                 check_error(ctx, "scene draws")
                 tris = inst.triangles_per_leaf
     a, b = (im.astype(np.int16) for im in images)
-    ratios = sorted(b / a for a, b in zip(t_inst, t_baked))  # per interleaved pair
-    return {"t_instanced": statistics.median(t_inst), "t_baked": statistics.median(t_baked),
-            "ratio": statistics.median(ratios), "ratio_range": (ratios[0], ratios[-1]),
+    return {"t_instanced": timed["base_ms"] / 1e3, "t_baked": timed["other_ms"] / 1e3,
+            "ratio": timed["ratio"], "ratio_range": tuple(timed["range"]),
             "mean_abs_diff": float(np.abs(a - b).mean()),
             "coverage": float((images[0][..., 3] > 0).mean()), "triangles_per_leaf": tris}

@@ -34,7 +34,7 @@ from typing import Any
 import moderngl
 
 from leafview.bench.instancing import bytes_per_leaf, instanced_vs_baked
-from leafview.bench.timing import Progress, bench_context, gl_info, median_time
+from leafview.bench.timing import Progress, bench_context, gl_info, interleaved, median_time
 from leafview.core.params import Bending, LeafParams
 from leafview.gpu.context import check_error
 from leafview.gpu.instanced import OffscreenTarget
@@ -96,15 +96,11 @@ def lobed_frame_ratio(ctx: moderngl.Context, target: OffscreenTarget, n: int, pa
                 frame()
                 ctx.finish()
                 frames.append(frame)
-            times: list[list[float]] = [[], []]
-            for _ in range(pairs):
-                for k in (0, 1):
-                    times[k].append(median_time(frames[k], 1, ctx.finish))
+            timed = interleaved(frames[1], frames[0], pairs, ctx.finish)   # ratio: lobed ÷ unlobed
             check_error(ctx, "lobed scene frames")
             counts = [r.level_counts() for r in (a, b)]
             out["lobed_views"][view] = {
-                "ratio": statistics.median(x / y for x, y in zip(*times)),
-                "lobed_ms": 1e3 * statistics.median(times[0]), "unlobed_ms": 1e3 * statistics.median(times[1]),
+                "ratio": timed["ratio"], "lobed_ms": timed["other_ms"], "unlobed_ms": timed["base_ms"],
                 "lobed_triangles": a.triangles(counts[0]), "unlobed_triangles": b.triangles(counts[1]),
                 "lobed_counts": [int(c) for c in counts[0]], "unlobed_counts": [int(c) for c in counts[1]]}
     out["lobed_frame_ratio"] = max(v["ratio"] for v in out["lobed_views"].values())
@@ -140,15 +136,11 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
                         row[view] = {"ms": 1e3 * t, "leaves_per_s": n / t, "drawn": int(counts.sum()),
                                      "levels": [int(c) for c in counts], "triangles": r.triangles(counts)}
                         if view == "ground" and n == leaf_counts[-1]:
-                            ratios, t_off = [], []
-                            for _ in range(2 if quick else 3):
-                                a = median_time(lambda: frame(off), 1, ctx.finish)
-                                b = median_time(frame, 1, ctx.finish)
-                                ratios.append(a / b)
-                                t_off.append(a)
-                            res["lod_speedup"] = statistics.median(ratios)
+                            # culling and LOD off ÷ on, in pairs (the frame with them on is warm)
+                            timed = interleaved(frame, lambda: frame(off), 2 if quick else 3, ctx.finish, warm=False)
+                            res["lod_speedup"] = timed["ratio"]
                             res["lod_speedup_leaves"] = n
-                            res["lod_off_ms"] = 1e3 * statistics.median(t_off)
+                            res["lod_off_ms"] = timed["other_ms"]
                         check_error(ctx, f"scene frame ({n} leaves, {view})")
                     res["frames"][str(n)] = row
             progress.step("lobed vs unlobed")

@@ -35,15 +35,16 @@ def median_time(fn: Callable[[], Any], repeats: int, finish: Callable[[], None] 
 
 
 def interleaved(base: Callable[[], Any], other: Callable[[], Any], rounds: int,
-                finish: Callable[[], None] | None = None) -> dict[str, Any]:
-    """``base`` and ``other`` timed in alternation, ``rounds`` pairs (each run once first, so that
-    compilation and allocation stay out of the clock): ms of each (median), the median of the
-    per-pair ratios other ÷ base, and their range. Side by side on a noisy machine, the pairs share
-    its load."""
-    base()
-    other()
-    if finish is not None:
-        finish()
+                finish: Callable[[], None] | None = None, *, warm: bool = True) -> dict[str, Any]:
+    """``base`` and ``other`` timed in alternation, ``rounds`` pairs (each run once first unless
+    ``warm`` is off, so that compilation and allocation stay out of the clock): ms of each
+    (median), the median of the per-pair ratios other ÷ base, and their range. Side by side on a
+    noisy machine, the pairs share its load."""
+    if warm:
+        base()
+        other()
+        if finish is not None:
+            finish()
     ta, tb, ratios = [], [], []
     for _ in range(rounds):
         a = median_time(base, 1, finish)
