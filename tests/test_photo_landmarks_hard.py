@@ -3,7 +3,7 @@ wedge-shaped base, and thin tips that the segmentation cuts short. Each seed bel
 the length before the base was extrapolated along the blade's width profile and the tip along its
 taper (measured 2026-12-03: seed 1513 base 2.06 %, 3001 base 9.66 % and apex 2.26 %, 3004 apex
 2.83 %, 3019 base 5.06 %); and a petiole stub too short to be found as a petiole, whose end was
-taken for the base before its root was looked for (seed 3003: base 3.06 %, now 0.16 %), and a
+taken for the base before its root was looked for (seed 3003: base 3.06 %, now 0.61 %), and a
 long concave drip tip whose last pixels are fainter than the threshold, now followed along its
 faint trace (seed 1520: apex 3.53 %, now 1.64 %; the narrow leaf 3013's apex 2.14 %, now 0.33 %,
 its base still 2.08 %). A petiole lying in a narrow cordate sinus whose walls meet over it beyond
