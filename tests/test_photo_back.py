@@ -33,7 +33,7 @@ def _point(p: np.ndarray) -> str:
 @pytest.fixture(scope="module")
 def pair():
     front = synthetic_photo(3, size=SIZE, kind="preset", petiole=False)
-    fit = fit_image(front.image, base=front.base, apex=front.apex, texture_size=TEX)
+    fit = fit_image(front.image, base=front.base, apex=front.apex, texture_size=TEX, face="up")  # its frame unmirrored
     return front, fit, synthetic_back(front, 1)
 
 

@@ -71,7 +71,7 @@ def tree_fits() -> list[tuple[SyntheticPhoto, ImageFit]]:
     out = []
     for seed in TREE_SEEDS:
         sp = synthetic_photo(seed, size=SIZE, veins="tree")
-        out.append((sp, fit_image(sp.image, dpi=sp.dpi)))
+        out.append((sp, fit_image(sp.image, dpi=sp.dpi, face="up")))   # the generator's frame, unmirrored
     return out
 
 

@@ -185,6 +185,7 @@ def _measure(sp: SyntheticPhoto, path: Path) -> dict[str, Any]:
             "base_pct": 100.0 * float(np.hypot(*(fit.outline.base - sp.base))) / length,
             "apex_pct": 100.0 * float(np.hypot(*(fit.outline.apex - sp.apex))) / length,
             "hausdorff_pct": fit.report["hausdorff_pct"], "asymmetric": fit.asymmetric, "rows": fit.report["rows"],
+            "face_detected": fit.report["face_detected"], "face_score": fit.report["face_score"],
             "petiole": fit.report["petiole_length"], "true_petiole": sp.petiole_px / length,
             "seconds": seconds, "cpu_s": cpu, "stage_seconds": fit.report["stage_seconds"]}
 
@@ -258,6 +259,7 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
     apex = [r["apex_pct"] for r in ok] or [float("nan")]
     total = sum(r["seconds"] for r in rows)
     stages = {k: statistics.median(r["stage_seconds"][k] for r in ok) for k in ok[0]["stage_seconds"]} if ok else {}
+    face = _face_counts(ok)
     return {**info, "quick": quick, "goals": GOALS, "photos": count, "size": list(SIZE), "failed": count - len(ok),
             "iou_median": statistics.median(ious), "iou_worst": min(ious),
             "base_pct_median": statistics.median(base), "base_pct_worst": max(base),
@@ -267,7 +269,21 @@ def run(quick: bool = False, ctx: moderngl.Context | None = None) -> dict[str, A
             "pool_first_s": first_s, "photos_per_s_pooled_overall": count / (first_s + pooled_s),
             "pooled_failed": sum(1 for f in pooled if isinstance(f, str)),
             "cpu_ms": 1e3 * sum(r["cpu_s"] for r in rows) / count, "stage_ms": {k: 1e3 * v for k, v in stages.items()},
-            "asymmetric_fits": sum(1 for r in ok if r["asymmetric"]), "rows": rows, **lobed}
+            "asymmetric_fits": sum(1 for r in ok if r["asymmetric"]), **face, "rows": rows, **lobed}
+
+
+def _face_counts(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    """Which side faces the camera (:func:`leafview.fit.photo_face.detect_face`) against each
+    photo's truth (``face_down``): right, wrong and unknown, all and split by the true face."""
+    out: dict[str, Any] = {}
+    for key, subset in (("face", rows), ("face_up", [r for r in rows if not r["face_down"]]),
+                        ("face_down", [r for r in rows if r["face_down"]])):
+        truth = ["down" if r["face_down"] else "up" for r in subset]
+        found = [r["face_detected"] for r in subset]
+        out[f"{key}_right"] = sum(1 for t, f in zip(truth, found) if f == t)
+        out[f"{key}_unknown"] = sum(1 for f in found if f == "unknown")
+        out[f"{key}_wrong"] = len(subset) - out[f"{key}_right"] - out[f"{key}_unknown"]
+    return out
 
 
 def format_table(res: dict[str, Any]) -> str:
@@ -294,6 +310,10 @@ def format_table(res: dict[str, Any]) -> str:
              "with it",
              "  wall time per stage, median        " + ", ".join(f"{k} {v:.0f} ms" for k, v in res["stage_ms"].items()),
              f"  failed photos {res['failed']}, fitted as two halves {res['asymmetric_fits']}",
+             f"  face up or down (found against the truth)  right {res['face_right']}, wrong {res['face_wrong']}, "
+             f"unknown {res['face_unknown']}  (face up: {res['face_up_right']} / {res['face_up_wrong']} / "
+             f"{res['face_up_unknown']}; face down: {res['face_down_right']} / {res['face_down_wrong']} / "
+             f"{res['face_down_unknown']})",
              f"  lobed photos ({res['lobed_photos']}: maple, oak, bilobed): fitted as lobed {res['lobed_detected']}, "
              f"IoU median {res['lobed_iou_median']:.4f} / worst {res['lobed_iou_worst']:.4f}, base median / worst "
              f"{res['lobed_base_pct_median']:.2f} / {res['lobed_base_pct_worst']:.2f} %, apex "
@@ -302,7 +322,9 @@ def format_table(res: dict[str, Any]) -> str:
     for r in res["rows"]:
         what = (f"error: {r['error'][:80]}" if "error" in r else
                 f"IoU {r['iou']:.4f}  base {r['base_pct']:5.2f} %  apex {r['apex_pct']:5.2f} %  rows {r['rows']}"
-                f"{'  halves' if r['asymmetric'] else ''}  {1e3 * r['seconds']:.0f} ms")
+                f"{'  halves' if r['asymmetric'] else ''}  face {r['face_detected']}"
+                f"{'' if r['face_detected'] == ('down' if r['face_down'] else 'up') else ' (' + ('down' if r['face_down'] else 'up') + ')'}"
+                f"  {1e3 * r['seconds']:.0f} ms")
         lines.append(f"    seed {r['seed']} {r['kind']:<10} {r['background']:<5} "
                      f"{'petiole' if r['petiole'] else '       '}  {what}")
     return "\n".join(lines)

@@ -56,6 +56,7 @@ from leafview.export.images import contact_sheet, write_image
 from leafview.fit.photo import DPI_RANGE, ImageFit, fit_image
 from leafview.fit.photo_back import BackFit, back_fit
 from leafview.fit.photo_batch import MAX_JOBS, default_jobs, fit_photos
+from leafview.fit.photo_face import FACES
 from leafview.fit.photo_lobed import LOBED_MODES
 from leafview.fit.photo_texture import MAX_TEXTURE_SIZE, MIN_TEXTURE_SIZE, texture_uint8
 from leafview.gpu import default_renderer
@@ -69,7 +70,7 @@ _CELL = 224                 # a contact sheet tile's side for up to _FULL_CELLS 
 _FULL_CELLS = 60
 _CLOUD_OPTIONS = (("scanlines", "--scanlines"), ("iterations", "--iterations"), ("keep_unexplained", "--keep-unexplained"))
 _PHOTO_OPTIONS = (("base", "--base"), ("apex", "--apex"), ("dpi", "--dpi"), ("texture_size", "--texture-size"),
-                  ("jobs", "--jobs"), ("lobed", "--lobed"), ("back", "--back"), ("back_base", "--back-base"),
+                  ("jobs", "--jobs"), ("lobed", "--lobed"), ("face", "--face"), ("back", "--back"), ("back_base", "--back-base"),
                   ("back_apex", "--back-apex"))
 
 
@@ -117,6 +118,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lobed", choices=LOBED_MODES, default=None,
                    help="photos: fit a lobed leaf (its closed margin): auto (when the outline looks lobed; "
                         "the default), on, or off (always the unilobed model)")
+    p.add_argument("--face", choices=FACES, default=None,
+                   help="photos: which side of the leaf faces the camera: auto (the default: face down where the "
+                        "veins show light/dark pairs of raised veins lit from one side, else face up), up, or down "
+                        "(the leaf is fitted mirrored about its midrib and the photo becomes its back texture "
+                        "NAME.back.png as well)")
     p.add_argument("--back", default=None, metavar="PHOTO",
                    help="one photo: a photo of the same leaf turned over (face down), made into its back texture "
                         "NAME.back.png")
@@ -162,21 +168,24 @@ def leaf_name(path: Path) -> str:
 def write_fit(fit: ImageFit, out: Path, *, leaf_set: bool,
               back: BackFit | None = None) -> tuple[Path, tuple[LeafParams, ...]]:
     """Write the leaf (``leaf_set``: the parts as a leaf set) to ``out`` and its texture
-    ``NAME.front.png`` beside it (with ``back``: and ``NAME.back.png``), all or none; returns the
+    ``NAME.front.png`` beside it (with ``back``, or a leaf fitted face down: and ``NAME.back.png``,
+    from ``back`` where given, else from the photo itself), all or none; returns the
     front texture's path and the parts as written (their texture resolving against ``out``'s
     folder)."""
     stem = safe_component(leaf_name(out), fallback="leaf")
     texture_name = f"{stem}.front.png"
-    back_name = f"{stem}.back.png" if back is not None else ""
+    back_image = back.texture if back is not None else fit.back_texture
+    back_name = f"{stem}.back.png" if back_image is not None else ""
     texture = LeafTexture(texture_name, back_name)
     parts = tuple(p.replace(texture=texture) for p in fit.parts)
     target = out.parent / texture_name
     with outputs():
         write_image(target, texture_uint8(fit.texture),
                     description=f"leafview front texture of {parts[0].name}, fitted to {Path(fit.photo.path).name}")
-        if back is not None:
-            write_image(out.parent / back_name, texture_uint8(back.texture),
-                        description=f"leafview back texture of {parts[0].name}, from {Path(back.photo.path).name}")
+        if back_image is not None:
+            source = back.photo.path if back is not None else fit.photo.path
+            write_image(out.parent / back_name, texture_uint8(back_image),
+                        description=f"leafview back texture of {parts[0].name}, from {Path(source).name}")
         if leaf_set:
             save_leaves(list(parts), out)
         else:
@@ -194,7 +203,8 @@ def _warn(source: str | Path, fit: ImageFit, leaf_set: bool, out: Path) -> None:
 
 
 def _options(args: argparse.Namespace) -> dict[str, Any]:
-    return {"dpi": args.dpi, "texture_size": args.texture_size or 512, "lobed": args.lobed or "auto"}
+    return {"dpi": args.dpi, "texture_size": args.texture_size or 512, "lobed": args.lobed or "auto",
+            "face": getattr(args, "face", None) or "auto"}
 
 
 # -- one photo -------------------------------------------------------------------------------------------
@@ -227,13 +237,13 @@ def run(args: argparse.Namespace) -> int:
     scale = f"{r['scale']:.4g} m ({r['dpi']:g} dpi)" if r["dpi"] else "1 (no resolution)"
     model = (f"a lobed margin of {r['controls']} control points" if r["lobed"] else
              f"{'/'.join(str(n) for n in r['rows'])} silhouette rows")
-    textures = (f"{texture.name} and {texture.name.removesuffix('.front.png')}.back.png" if back is not None
-                else texture.name)
+    textures = (f"{texture.name} and {texture.name.removesuffix('.front.png')}.back.png"
+                if back is not None or fit.back_texture is not None else texture.name)
     back_note = f"back photo IoU {back.iou:.3f} with the turned-over fit, " if back is not None else ""
     report(args, f"wrote {out} and {textures}: IoU {r['iou']:.3f} with the traced leaf, Hausdorff "
                  f"{r['hausdorff_pct']:.2f} % of the length, {model}"
                  f"{', two halves' if fit.asymmetric else ''}, petiole {r['petiole_length']:.3f}, scale {scale}, "
-                 f"{back_note}in {r['seconds']:.2f} s")
+                 f"face {r['face']} (found {r['face_detected']}), {back_note}in {r['seconds']:.2f} s")
     return EXIT_OK
 
 

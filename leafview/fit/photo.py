@@ -7,8 +7,18 @@
 2. **The canonical frame**: the similarity ``leaf_from_pixel`` taking the base to (0, 0) and the
    apex to (0, 1), one leaf length to 1. Pixel y runs down and leaf y up, so the map flips y before
    it turns: the leaf keeps the handedness the camera saw, and a leaf photographed face up from
-   above comes out face up, its left and right sides where the photo shows them. (A leaf lying
-   face down is fitted as it shows: its underside becomes the front; the fit cannot tell.)
+   above comes out face up, its left and right sides where the photo shows them.
+   **Face down** (:func:`leafview.fit.photo_face.detect_face` with ``face="auto"``, or
+   ``face="down"``): the photo shows the leaf's back, which is the leaf mirrored about its
+   midrib, so the frame gets the mirror diag(-1, 1) after the similarity (``leaf_from_pixel =
+   MIRROR · frame``, the convention of :mod:`leafview.fit.photo_back`): the outline, its sides,
+   the halves of an asymmetric fit (the photo's left side becomes the leaf's right), the texture
+   (resampled through the mirrored map, so a texel at (u, v) shows the photo where the leaf point
+   (u, v) lies) and the measures all follow from it, and the leaf comes out with the real leaf's
+   handedness. The photo's pixels then show the back: they become ``back_texture`` (the layout of
+   :func:`leafview.core.texture.texture_st`, as :func:`leafview.fit.photo_back.back_fit` makes it),
+   and the front texture holds the same pixels, the only view of the leaf there is. Where the
+   detector cannot tell (``unknown``), the leaf is taken as face up.
 3. **Ω** (Chaurasia & Beardsley 2017, sec. 3): the outline is split at base and apex into the
    right (x > 0) and left sides; the symmetric model and two one-sided halves (Garg & Leow 2011,
    Fig. 6, as :mod:`leafview.botany.asymmetric` draws them) are fitted together by the batched fit
@@ -70,6 +80,7 @@ from leafview.core.bspline import sample_closed
 from leafview.core.params import SCALE_RANGE, Bending, LeafParams, Transform
 from leafview.errors import ParamError
 from leafview.fit.blas import single_threaded
+from leafview.fit.photo_face import FACES, FaceEstimate, detect_face
 from leafview.fit.photo_lobed import (
     LOBED_MIN_MIRROR,
     LOBED_MODES,
@@ -90,7 +101,7 @@ from leafview.fit.photo_veins import VeinEstimate, detect_veins, with_veins
 
 __all__ = ["ImageFit", "fit_image", "canonical_frame", "outline_sides", "margin_pixels", "polygon_mask",
            "top_view_iou", "PHOTO_FIT_TARGET", "HALVES_AREA_GAIN", "TOUCHING_FIT_ERROR", "METRES_PER_INCH",
-           "MIN_LENGTH_PX", "DPI_RANGE"]
+           "MIN_LENGTH_PX", "DPI_RANGE", "MIRROR"]
 
 PHOTO_FIT_TARGET = 0.01    # Hausdorff error ÷ leaf length accepted when choosing the rows
 HALVES_AREA_GAIN = 0.01    # two halves must miss this much less of the blade's area than one symmetric leaf
@@ -104,6 +115,7 @@ TOUCHING_FIT_ERROR = 0.10
 METRES_PER_INCH = 0.0254
 MIN_LENGTH_PX = 8.0        # a blade shorter than this (base to apex, in pixels) cannot be fitted
 DPI_RANGE = (1.0, 1e6)
+MIRROR = np.diag([-1.0, 1.0, 1.0])     # the leaf turned over about its midrib: x -> -x
 _SIDE_SAMPLES = 160        # points per side handed to the fit
 _MARGIN_SAMPLES = 513      # margin samples for the measures
 
@@ -133,6 +145,9 @@ class ImageFit:
         One line each: cut border, no resolution, clamped petiole, differing sides.
     photo
         The photo the fit was made from.
+    back_texture
+        Face down (``report["face"] == "down"``): the photo shows the leaf's back, so its texture
+        (the same array as ``texture``) is the back texture too; None face up.
     """
 
     parts: tuple[LeafParams, ...]
@@ -142,6 +157,7 @@ class ImageFit:
     report: dict[str, Any]
     warnings: tuple[str, ...]
     photo: Photo
+    back_texture: NDArray[np.float32] | None = None
 
     @property
     def asymmetric(self) -> bool:
@@ -328,7 +344,8 @@ def _choose(right: F64, left: F64, target: float) -> tuple[tuple[LeafParams, Lea
 @single_threaded      # many small matrix products: BLAS threads only hand off work on a busy machine
 def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, base: ArrayLike | None = None,
               apex: ArrayLike | None = None, dpi: float | None = None, name: str = "", texture_size: int = 512,
-              target: float = PHOTO_FIT_TARGET, halves: bool = True, lobed: str = "auto") -> ImageFit:
+              target: float = PHOTO_FIT_TARGET, halves: bool = True, lobed: str = "auto",
+              face: str = "auto") -> ImageFit:
     """Fit the leaf model to the leaf in a photo or scan (see the module docstring).
 
     Parameters
@@ -352,6 +369,10 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
         ``auto``: a lobed leaf when the traced outline looks lobed
         (:func:`leafview.fit.photo_lobed.looks_lobed`); ``on``: always a lobed leaf (its closed
         margin, ``lobes.outline``); ``off``: always Ω (the unilobed fit).
+    face
+        Which side of the leaf faces the camera: ``auto`` (:func:`leafview.fit.photo_face.detect_face`;
+        face up where it cannot tell), ``up`` or ``down`` (the leaf fitted mirrored, see the
+        module docstring).
 
     Returns
     -------
@@ -364,8 +385,10 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
         ``halves_error_pct``, ``petiole_length``, ``dpi``, ``scale``, ``cut_sides``, ``method``,
         ``warnings``, ``veins`` (:meth:`leafview.fit.photo_veins.VeinEstimate.report`: ``status``
         ``pinnate`` with the numbers given to ``venation``, or ``not visible`` and the
-        ``reason``), ``seconds`` and ``stage_seconds`` (read, outline, fit, texture, veins,
-        measures).
+        ``reason``), ``face`` (``up`` or ``down``: what the fit took), ``face_detected``
+        (``up``, ``down`` or ``unknown``: what the detector found, run whatever ``face`` says),
+        ``face_score`` and ``face_evidence`` (:meth:`leafview.fit.photo_face.FaceEstimate.report`),
+        ``seconds`` and ``stage_seconds`` (read, outline, fit, texture, veins, measures).
 
     Raises
     ------
@@ -378,6 +401,8 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
         raise ParamError("target", f"must be a positive number, got {target!r}")
     if lobed not in LOBED_MODES:
         raise ParamError("lobed", f"must be one of {', '.join(LOBED_MODES)}, got {lobed!r}")
+    if face not in FACES:
+        raise ParamError("face", f"must be one of {', '.join(FACES)}, got {face!r}")
     photo = as_photo(image_or_path)
     source = photo.path or None
     dots = _check_dpi(dpi, photo)
@@ -414,10 +439,18 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
     name = name or (Path(photo.path).stem if photo.path else "leaf")
     warnings = list(traced.warnings)
     frame = canonical_frame(traced.base, traced.apex)
-    outline = _apply(frame, traced.outline)
+    estimate = detect_face(photo.rgb, traced.blade, frame)
+    down = face == "down" or (face == "auto" and estimate.face == "down")
+    if down:
+        frame = MIRROR @ frame
+        warnings.append(f"the leaf is {'judged' if face == 'auto' else 'given as'} face down (score "
+                        f"{estimate.score:.0f}: light/dark pairs across the veins): fitted mirrored about its midrib, "
+                        "the photo as its back texture; give --face up if it lies face up")
     if is_lobed:
-        return _fit_lobed(photo, traced, frame, outline, measures, name, dots, warnings, target, texture_size,
-                          (t0, t1, t2))
+        fit = _fit_lobed(photo, traced, frame, _apply(frame, traced.outline), measures, name, dots, warnings,
+                         target, texture_size, (t0, t1, t2))
+        return _with_face(fit, face, down, estimate)
+    outline = _apply(frame, traced.outline)
     try:
         right, left = outline_sides(outline)
     except ParamError as exc:
@@ -501,7 +534,17 @@ def fit_image(image_or_path: Photo | str | os.PathLike[str] | NDArray[Any], *, b
     report["stage_seconds"] = {"read": round(t1 - t0, 4), "outline": round(t2 - t1, 4), "fit": round(t3 - t2, 4),
                                "texture": round(t4 - t3, 4), "veins": round(t_veins - t4, 4),
                                "measures": round(t5 - t_veins, 4)}
-    return ImageFit(parts, texture, traced, frame, report, tuple(warnings), photo)
+    return _with_face(ImageFit(parts, texture, traced, frame, report, tuple(warnings), photo), face, down, estimate)
+
+
+def _with_face(fit: ImageFit, face: str, down: bool, estimate: FaceEstimate) -> ImageFit:
+    """``fit`` with the face in its report (after ``warnings``, before the timings) and, face
+    down, its texture as the back texture."""
+    report = dict(fit.report)
+    timings = {k: report.pop(k) for k in ("seconds", "stage_seconds")}
+    report.update(face="down" if down else "up", face_given=face, face_detected=estimate.face,
+                  face_score=round(estimate.score, 3), face_evidence=estimate.report(), **timings)
+    return replace(fit, report=report, back_texture=fit.texture if down else None)
 
 
 # -- a lobed leaf ----------------------------------------------------------------------------------------

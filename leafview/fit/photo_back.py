@@ -38,13 +38,13 @@ from shapely.geometry import Polygon
 
 from leafview.botany.lobe_sweep import sweep_table
 from leafview.errors import ParamError
-from leafview.fit.photo import MIN_LENGTH_PX, ImageFit, canonical_frame, margin_pixels, top_view_iou
+from leafview.fit.photo import MIN_LENGTH_PX, MIRROR, ImageFit, canonical_frame, margin_pixels, top_view_iou
 from leafview.fit.photo_io import Photo, as_photo
 from leafview.fit.photo_lobed import lobe_measures, lobed_landmarks
 from leafview.fit.photo_outline import LeafOutline, leaf_outline
 from leafview.fit.photo_texture import leaf_texture, lobed_texture
 
-__all__ = ["BackFit", "back_fit", "back_texture", "BACK_MIN_IOU", "MIRROR"]
+__all__ = ["BackFit", "back_fit", "back_texture", "BACK_MIN_IOU"]
 
 # The front fit's margin against the back photo's traced blade. Measured on seeded synthetic pairs
 # (fit_image on synthetic_photo with the true landmarks; the back from leafview.fit.synthetic_back,
@@ -53,7 +53,6 @@ __all__ = ["BackFit", "back_fit", "back_texture", "BACK_MIN_IOU", "MIRROR"]
 # lobed leaves 0.968 to 0.986; the backs of the 30 other pairings at most 0.86. 0.9 lies about
 # halfway: 0.047 below the worst match and 0.04 above the best mismatch.
 BACK_MIN_IOU = 0.9
-MIRROR = np.diag([-1.0, 1.0, 1.0])     # the leaf turned over about its midrib: x -> -x
 _TURN_STEP = 4.0                       # degrees between the turns tried when registering the outline
 
 F64 = NDArray[np.float64]
