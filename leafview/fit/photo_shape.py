@@ -139,6 +139,7 @@ PETIOLE_RADIUS = 0.25         # opening radius / largest inscribed radius of the
 PETIOLE_MIN_LENGTH = 0.04     # petiole length / extent of the leaf, at least
 PETIOLE_MIN_RADIUS = 1.0      # px: a thinner strand is an apex tip or noise
 PETIOLE_EVENNESS = 0.7        # width of the free third / width of the middle third, at least
+PETIOLE_END = 0.5            # a petiole joins the blade in this outer share of the base's half, where the veins show which
 PETIOLE_TURN = 60.0           # degrees: a petiole running more off the base-apex line is none
 BASE_EXTRAPOLATION = 1.0      # of the distance back to zero width at the blade's first slope
 BASE_RUN = 0.1               # the mean growth is read from twice to four times the petiole's half-width, over at most this of the extent
@@ -1029,6 +1030,27 @@ def _off_axis(pet: _Petiole, found: tuple[NDArray[np.bool_], Array, Array, Array
     return norm > 0 and float(into @ ahead) < math.cos(math.radians(PETIOLE_TURN)) * norm
 
 
+def _against_veins(pet: _Petiole, mask: NDArray[np.bool_], f: int, grey: NDArray[np.float32] | None) -> bool:
+    """Whether the secondary veins, where they show clearly (:func:`_vein_sense` at least
+    :data:`VEIN_SENSE`, along the principal axis or across it as :func:`_landmarks` turns it), put
+    the base away from the petiole ``pet``: its joint with the blade does not lie in the outer
+    :data:`PETIOLE_END` of the base's half of the blade along the midrib (it lies on the apex's half,
+    a thin apex tip, or on the blade's side, a tooth or a sliver of shadow along the margin)."""
+    if grey is None:
+        return False
+    centre, axis, elongation = _moments(mask)
+    veins, across = _vein_sense(grey, mask, centre, axis)
+    if abs(across) >= VEIN_SENSE and abs(across) > VEIN_TURN * abs(veins) and elongation < VEIN_TURN_ELONGATION:
+        axis, veins = np.array([-axis[1], axis[0]]), across
+    if abs(veins) < VEIN_SENSE:
+        return False
+    s = (np.argwhere(mask)[:, ::-1] - centre) @ axis
+    joint = (pet.path[-1] + 0.5) / f - 0.5
+    towards_base = -math.copysign(1.0, veins)
+    half = float(s.max() if towards_base > 0 else -s.min())
+    return float((joint - centre) @ axis) * towards_base < PETIOLE_END * half
+
+
 def leaf_shape(mask: NDArray[np.bool_], *, fine: NDArray[np.bool_] | None = None, f: int = 1,
                grey: NDArray[np.float32] | None = None, base: Array | None = None,
                apex: Array | None = None, colour: NDArray[np.floating] | None = None) -> Shape:
@@ -1050,6 +1072,8 @@ def leaf_shape(mask: NDArray[np.bool_], *, fine: NDArray[np.bool_] | None = None
     core = _up(ndimage.binary_dilation(opened, _EIGHT) if f > 1 else opened, f, fine.shape)
     pet = _find_petiole(fine, core, extent)
     given = base
+    if pet is not None and given is None and apex is None and _against_veins(pet, mask, f, grey):
+        pet = None                  # a tooth, a sliver or the apex's own tip at the end the veins point to
     found = _landmarks(mask, fine, f, grey, pet, extent, given, apex, colour)
     if pet is not None and given is None and _off_axis(pet, found):
         found = _landmarks(mask, fine, f, grey, None, extent, given, apex)    # a tooth or a second leaf, not a petiole
