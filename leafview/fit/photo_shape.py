@@ -1005,10 +1005,7 @@ def _landmarks(mask: NDArray[np.bool_], fine: NDArray[np.bool_], f: int, grey: N
         warnings.append("the blade is nearly round, so which way its axis runs is a guess: check the base and apex, "
                         "or give --base and --apex")
     if base is None:
-        veins, across = _vein_sense(grey, blade_w, centre_w, axis)
-        if (abs(across) >= VEIN_SENSE and abs(across) > VEIN_TURN * abs(veins)
-                and elongation < VEIN_TURN_ELONGATION):
-            axis, veins = np.array([-axis[1], axis[0]]), across     # the midrib runs across the principal axis
+        axis, veins = _midrib_axis(grey, blade_w, centre_w, axis, elongation)
         base, note = _base_without_petiole(contour, centre, axis, apex, float(f), veins, elongation)
         if note:
             warnings.append(note)
@@ -1030,18 +1027,28 @@ def _off_axis(pet: _Petiole, found: tuple[NDArray[np.bool_], Array, Array, Array
     return norm > 0 and float(into @ ahead) < math.cos(math.radians(PETIOLE_TURN)) * norm
 
 
+def _midrib_axis(grey: NDArray[np.float32] | None, blade: NDArray[np.bool_], centre: Array, axis: Array,
+                 elongation: float) -> tuple[Array, float]:
+    """The axis the midrib runs along and the veins' sense along it (:func:`_vein_sense`): the
+    principal ``axis``, or the axis across it where the veins' sense across is clear (at least
+    :data:`VEIN_SENSE`), :data:`VEIN_TURN` times the sense along and the blade less than
+    :data:`VEIN_TURN_ELONGATION` times longer than wide."""
+    veins, across = _vein_sense(grey, blade, centre, axis)
+    if abs(across) >= VEIN_SENSE and abs(across) > VEIN_TURN * abs(veins) and elongation < VEIN_TURN_ELONGATION:
+        return np.array([-axis[1], axis[0]]), across
+    return axis, veins
+
+
 def _against_veins(pet: _Petiole, mask: NDArray[np.bool_], f: int, grey: NDArray[np.float32] | None) -> bool:
     """Whether the secondary veins, where they show clearly (:func:`_vein_sense` at least
-    :data:`VEIN_SENSE`, along the principal axis or across it as :func:`_landmarks` turns it), put
+    :data:`VEIN_SENSE`, along the midrib's axis, :func:`_midrib_axis`), put
     the base away from the petiole ``pet``: its joint with the blade does not lie in the outer
     :data:`PETIOLE_END` of the base's half of the blade along the midrib (it lies on the apex's half,
     a thin apex tip, or on the blade's side, a tooth or a sliver of shadow along the margin)."""
     if grey is None:
         return False
     centre, axis, elongation = _moments(mask)
-    veins, across = _vein_sense(grey, mask, centre, axis)
-    if abs(across) >= VEIN_SENSE and abs(across) > VEIN_TURN * abs(veins) and elongation < VEIN_TURN_ELONGATION:
-        axis, veins = np.array([-axis[1], axis[0]]), across
+    axis, veins = _midrib_axis(grey, mask, centre, axis, elongation)
     if abs(veins) < VEIN_SENSE:
         return False
     s = (np.argwhere(mask)[:, ::-1] - centre) @ axis
