@@ -107,6 +107,9 @@ def test_leafview_fit_with_a_back_photo_writes_and_renders_the_back(gl, pair, tm
     assert "wrong.jpg" in capsys.readouterr().err and not out.parent.exists()
     assert main(["fit", str(front_path), "-o", str(out), "--back-base", "1,1", *marks]) == 2
     assert "--back-base applies with --back" in capsys.readouterr().err
+    # with --back, PHOTO is the upper side: --face down contradicts it (exit 2, nothing written)
+    assert main(["fit", str(front_path), "--back", str(back_path), "--face", "down", "-o", str(out), *marks]) == 2
+    assert "--face down with --back" in capsys.readouterr().err and not out.parent.exists()
 
     # the back's landmarks given, as the front's are (a blade without a petiole can hide its base)
     back_marks = ["--back-base", _point(back.base), "--back-apex", _point(back.apex)]

@@ -122,7 +122,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="photos: which side of the leaf faces the camera: auto (the default: face down where the "
                         "veins show light/dark pairs of raised veins lit from one side, else face up), up, or down "
                         "(the leaf is fitted mirrored about its midrib and the photo becomes its back texture "
-                        "NAME.back.png as well)")
+                        "NAME.back.png as well); with --back, PHOTO is taken as face up")
     p.add_argument("--back", default=None, metavar="PHOTO",
                    help="one photo: a photo of the same leaf turned over (face down), made into its back texture "
                         "NAME.back.png")
@@ -228,7 +228,14 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"{flag} applies with --back BACK_PHOTO, a photo of the leaf turned over")
     if back_photo is not None and not Path(back_photo).is_file():
         raise UsageError(f"--back {back_photo}: no such photo file")
-    fit = fit_image(src, base=args.base, apex=args.apex, name=leaf_name(out), halves=leaf_set, **_options(args))
+    options = _options(args)
+    if back_photo is not None:
+        # with a photo of the leaf turned over, PHOTO shows the upper side: it is fitted face up
+        if getattr(args, "face", None) == "down":
+            raise UsageError(f"--face down with --back {back_photo}: PHOTO must show the leaf's upper side and --back "
+                             "its underside; give the face-up photo as PHOTO, or leave out --back")
+        options["face"] = "up"
+    fit = fit_image(src, base=args.base, apex=args.apex, name=leaf_name(out), halves=leaf_set, **options)
     back = (back_fit(fit, back_photo, base=args.back_base, apex=args.back_apex) if back_photo is not None
             else None)
     _warn(src, fit, leaf_set, out)
