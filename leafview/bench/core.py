@@ -60,7 +60,6 @@ GOALS = {
     "baked_vs_param_bytes": 250.0,
     "ripple_overhead": 1.3,  # at most: lower is better
     "edit_latency_ratio": 1.2,  # at most: viewer frame carrying an edit ÷ steady frame
-    "vs_paper_550": 20.0,
 }
 
 _CONFIG = {
@@ -414,7 +413,8 @@ def format_table(res: dict[str, Any]) -> str:
          f"{res['viewer_edit_upload_bytes']} B uploaded"),
         (f"leaves/s at {res['triangles_per_leaf']} tris", num(res["leaves_per_s_220tri"]),
          f"instanced path, grid {sg[0]}×{sg[1]}"),
-        ("vs paper (550 leaves/s)", f"{num(res['vs_paper_550'])}×", _goal("vs_paper_550", res)),
+        ("vs paper (550 leaves/s), draw only", f"{num(res['vs_paper_550'])}×",
+         "not the same work: the paper generates each leaf; end to end: leafview bench shapes"),
         ("machine", f"{res['cpu_count']} CPUs",
          f"Python {res['python']}, numpy {res['numpy']}, moderngl {res['moderngl']}, "
          f"matplotlib {res['matplotlib']}"),
